@@ -1,0 +1,7 @@
+//! eyekey: show a document on a 5D light-field display so that only one enrolled person can read it.
+//!
+//! The physics and solvers (`optics`, `spectral`, `display`, `transport`, `solve`, `encode`, `evaluate`)
+//! are synchronous and know nothing of the service; `service` depends on them, never the reverse.
+
+pub mod optics;
+pub mod spectral;

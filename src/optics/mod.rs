@@ -1,0 +1,3 @@
+//! Ocular optics: Zernike wavefronts (OSA/ANSI Z80.28) and vision profiles.
+
+pub mod zernike;
