@@ -3,5 +3,15 @@
 //! The physics and solvers (`optics`, `spectral`, `display`, `transport`, `solve`, `encode`, `evaluate`)
 //! are synchronous and know nothing of the service; `service` depends on them, never the reverse.
 
+pub mod cli;
+pub mod display;
+pub mod glyphs;
+pub mod imaging;
+pub mod observer;
 pub mod optics;
+pub mod pipeline;
+pub mod population;
+pub mod solve;
 pub mod spectral;
+pub mod transport;
+pub mod service;
