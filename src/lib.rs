@@ -5,6 +5,7 @@
 
 pub mod cli;
 pub mod display;
+pub mod encode;
 pub mod glyphs;
 pub mod imaging;
 pub mod observer;
