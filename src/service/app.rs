@@ -1,0 +1,290 @@
+//! Building and running the service: secrets, database, router, workers, graceful shutdown.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context as _;
+use axum::extract::DefaultBodyLimit;
+use axum::http::StatusCode;
+use axum::Router;
+use tokio::net::TcpListener;
+use tokio::sync::{broadcast, watch, Notify};
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::timeout::TimeoutLayer;
+use tower_http::trace::TraceLayer;
+use utoipa::OpenApi as _;
+use utoipa_swagger_ui::SwaggerUi;
+
+use super::config::Config;
+use super::crypto::{generate_token, token_hash, MasterKey};
+use super::error::{json_error_bodies, panic_response};
+use super::openapi::ApiDoc;
+use super::routes;
+use super::state::{AppState, Inner};
+use super::{jobs, store};
+
+/// File in the data directory holding the generated operator token.
+pub const OPERATOR_TOKEN_FILE: &str = "operator-token";
+/// File in the data directory holding the generated master key.
+pub const MASTER_KEY_FILE: &str = "master.key";
+
+/// A built service: listening, migrated, not yet serving.
+pub struct Application {
+    listener: TcpListener,
+    router: Router,
+    state: AppState,
+    shutdown: ShutdownHandle,
+}
+
+/// Starts a graceful shutdown of an [`Application`] from elsewhere (signals do it too).
+#[derive(Clone)]
+pub struct ShutdownHandle(Arc<watch::Sender<bool>>);
+
+impl ShutdownHandle {
+    /// Begins shutdown: stop accepting requests and claiming jobs, re-queue running jobs.
+    pub fn shutdown(&self) {
+        self.0.send_replace(true);
+    }
+}
+
+impl Application {
+    /// Resolves secrets, opens and migrates the database, binds the listener (port 0 picks a free port).
+    pub async fn build(config: Config) -> anyhow::Result<Self> {
+        let data_dir = config.data_dir.clone();
+        for sub in ["", "documents", "jobs"] {
+            tokio::fs::create_dir_all(data_dir.join(sub))
+                .await
+                .with_context(|| format!("creating {}", data_dir.join(sub).display()))?;
+        }
+        restrict_dir(&data_dir);
+
+        let operator_token = match &config.operator_token {
+            Some(t) => t.clone(),
+            None => read_or_create_secret(
+                &data_dir.join(OPERATOR_TOKEN_FILE),
+                "operator token",
+                || generate_token("eko_"),
+            )?,
+        };
+        let master_key_text = match &config.master_key_hex {
+            Some(k) => k.clone(),
+            None => read_or_create_secret(
+                &data_dir.join(MASTER_KEY_FILE),
+                "master key",
+                MasterKey::generate_hex,
+            )?,
+        };
+        let master_key = MasterKey::from_hex(&master_key_text).context("EYEKEY_MASTER_KEY")?;
+
+        let db = store::connect(&config.database_path())
+            .await
+            .with_context(|| format!("opening {}", config.database_path().display()))?;
+        store::migrate(&db)
+            .await
+            .context("applying database migrations")?;
+        store::check_master_key(&db, &master_key).await?;
+        tracing::info!(database = %config.database_path().display(), "database ready");
+
+        let listener = TcpListener::bind(config.bind)
+            .await
+            .with_context(|| format!("binding {}", config.bind))?;
+        let (shutdown_tx, shutdown_rx) = watch::channel(false);
+        let state = AppState(Arc::new(Inner {
+            db,
+            operator_token_hash: token_hash(&operator_token),
+            master_key,
+            events: broadcast::channel(1024).0,
+            job_queued: Notify::new(),
+            shutdown: shutdown_rx,
+            instance_id: uuid::Uuid::new_v4().to_string(),
+            metrics: routes::metrics::recorder(),
+            config,
+        }));
+        let router = router(state.clone());
+        Ok(Self {
+            listener,
+            router,
+            state,
+            shutdown: ShutdownHandle(Arc::new(shutdown_tx)),
+        })
+    }
+
+    /// The port the listener is bound to.
+    pub fn port(&self) -> u16 {
+        self.local_addr().port()
+    }
+
+    /// The address the listener is bound to.
+    pub fn local_addr(&self) -> SocketAddr {
+        self.listener.local_addr().unwrap_or(self.state.config.bind)
+    }
+
+    /// The shared state (the tests drive the worker step with it).
+    pub fn state(&self) -> AppState {
+        self.state.clone()
+    }
+
+    /// A handle that stops the service.
+    pub fn shutdown_handle(&self) -> ShutdownHandle {
+        self.shutdown.clone()
+    }
+
+    /// Serves requests and runs the workers until SIGINT, SIGTERM or [`ShutdownHandle::shutdown`].
+    ///
+    /// On shutdown: the listener stops accepting, event streams end, in-flight requests finish, workers
+    /// stop claiming, and running jobs are cancelled and re-queued (their attempt not counted) within the
+    /// configured grace period; a job still running after it is picked up again when its lease expires.
+    pub async fn run_until_stopped(self) -> anyhow::Result<()> {
+        let Self {
+            listener,
+            router,
+            state,
+            shutdown,
+        } = self;
+        tracing::info!(address = %listener.local_addr()?, workers = state.config.workers, "eyekey serving");
+        let mut workers = jobs::spawn_workers(&state, state.config.workers);
+
+        let signal_shutdown = shutdown.clone();
+        tokio::spawn(async move {
+            wait_for_signal().await;
+            tracing::info!("shutdown signal received");
+            signal_shutdown.shutdown();
+        });
+        let mut stopped = state.shutdown.clone();
+        axum::serve(listener, router)
+            .with_graceful_shutdown(async move {
+                super::state::stopped(&mut stopped).await;
+            })
+            .await
+            .context("serving HTTP")?;
+
+        shutdown.shutdown();
+        let grace = state.config.queue.shutdown_grace;
+        let drained = tokio::time::timeout(grace, async {
+            while workers.join_next().await.is_some() {}
+        })
+        .await;
+        if drained.is_err() {
+            tracing::warn!(
+                ?grace,
+                "workers did not stop in time; their jobs will be re-claimed after the lease"
+            );
+            workers.abort_all();
+        }
+        state.db.close().await;
+        tracing::info!("eyekey stopped");
+        Ok(())
+    }
+}
+
+/// The full HTTP stack: routes, metrics, documentation, limits and error shaping.
+fn router(state: AppState) -> Router {
+    let limits = &state.config.limits;
+    Router::new()
+        .merge(routes::router(limits.max_document_bytes))
+        .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
+        .route_layer(axum::middleware::from_fn(routes::metrics::track_http))
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            limits.request_timeout,
+        ))
+        .layer(CatchPanicLayer::custom(panic_response))
+        .layer(axum::middleware::map_response(json_error_bodies))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+async fn wait_for_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = term => {}
+    }
+}
+
+/// Reads a secret file, or creates it (mode 0600) with a generated value. Logs the path, never the value.
+fn read_or_create_secret(
+    path: &Path,
+    what: &str,
+    generate: impl FnOnce() -> String,
+) -> anyhow::Result<String> {
+    match std::fs::read_to_string(path) {
+        Ok(text) => {
+            warn_if_readable_by_others(path);
+            let value = text.trim().to_string();
+            anyhow::ensure!(!value.is_empty(), "{} is empty", path.display());
+            tracing::info!(path = %path.display(), "using the {what} from this file");
+            Ok(value)
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let value = generate();
+            write_private(path, &value).with_context(|| format!("writing {}", path.display()))?;
+            tracing::info!(path = %path.display(), "generated a new {what} into this file (mode 0600)");
+            Ok(value)
+        }
+        Err(e) => Err(anyhow::Error::new(e).context(format!("reading {}", path.display()))),
+    }
+}
+
+fn write_private(path: &Path, value: &str) -> std::io::Result<()> {
+    use std::io::Write as _;
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt as _;
+        options.mode(0o600);
+    }
+    let mut file = options.open(path)?;
+    file.write_all(value.as_bytes())?;
+    file.write_all(b"\n")?;
+    file.sync_all()
+}
+
+fn warn_if_readable_by_others(path: &Path) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        if let Ok(meta) = std::fs::metadata(path) {
+            if meta.permissions().mode() & 0o077 != 0 {
+                tracing::warn!(path = %path.display(), "secret file is readable by other users; chmod 600 it");
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+}
+
+fn restrict_dir(dir: &Path) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        if let Err(e) = std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)) {
+            tracing::warn!(dir = %dir.display(), error = %e, "could not restrict the data directory to its owner");
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = dir;
+}
+
+/// The path of the generated operator token file in a data directory.
+pub fn operator_token_path(data_dir: &Path) -> PathBuf {
+    data_dir.join(OPERATOR_TOKEN_FILE)
+}

@@ -1,0 +1,162 @@
+//! Service configuration: one typed struct, filled from flags and environment by [`ServeArgs`].
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Command-line flags and environment variables of `eyekey serve`.
+///
+/// Secrets (`EYEKEY_OPERATOR_TOKEN`, `EYEKEY_MASTER_KEY`) are best passed through the environment; when
+/// absent they are read from, or generated into, `operator-token` and `master.key` in the data directory
+/// (mode 0600). Their values are never logged.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ServeArgs {
+    /// Address and port to listen on.
+    #[arg(long, env = "EYEKEY_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: SocketAddr,
+    /// Directory holding the database, uploaded documents, job outputs and generated secrets.
+    #[arg(long, env = "EYEKEY_DATA_DIR", default_value = "./eyekey-data")]
+    pub data_dir: PathBuf,
+    /// Operator bearer token (default: `<data-dir>/operator-token`, generated on first start).
+    #[arg(long, env = "EYEKEY_OPERATOR_TOKEN", hide_env_values = true)]
+    pub operator_token: Option<String>,
+    /// Master key for profile encryption, 64 hex digits (default: `<data-dir>/master.key`, generated on
+    /// first start).
+    #[arg(long, env = "EYEKEY_MASTER_KEY", hide_env_values = true)]
+    pub master_key: Option<String>,
+    /// Jobs solved at once. Each job already spreads over every core (rayon), so 1 is usually right.
+    #[arg(long, env = "EYEKEY_WORKERS", default_value_t = 1)]
+    pub workers: usize,
+    /// Largest accepted document upload, bytes.
+    #[arg(long, env = "EYEKEY_MAX_DOCUMENT_BYTES", default_value_t = 20 * 1024 * 1024)]
+    pub max_document_bytes: usize,
+    /// Largest accepted document, pixels (width × height), checked before decoding.
+    #[arg(long, env = "EYEKEY_MAX_DOCUMENT_PIXELS", default_value_t = 16 * 1024 * 1024)]
+    pub max_document_pixels: u64,
+    /// Largest accepted JSON request body, bytes.
+    #[arg(long, env = "EYEKEY_MAX_BODY_BYTES", default_value_t = 1024 * 1024)]
+    pub max_body_bytes: usize,
+    /// Time a request may take until its response starts, seconds.
+    #[arg(long, env = "EYEKEY_REQUEST_TIMEOUT_SECS", default_value_t = 30)]
+    pub request_timeout_secs: u64,
+    /// Lease a worker holds on a running job, seconds; renewed by a heartbeat every third of it.
+    #[arg(long, env = "EYEKEY_LEASE_SECS", default_value_t = 30)]
+    pub lease_secs: u64,
+    /// Attempts a job gets before it fails (a crashed or timed-out attempt counts).
+    #[arg(long, env = "EYEKEY_MAX_ATTEMPTS", default_value_t = 3)]
+    pub max_attempts: u32,
+    /// On shutdown, how long running jobs get to stop and be re-queued, seconds.
+    #[arg(long, env = "EYEKEY_SHUTDOWN_GRACE_SECS", default_value_t = 20)]
+    pub shutdown_grace_secs: u64,
+}
+
+/// Everything the service needs to start.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// Listen address; port 0 picks a free port (see `Application::port`).
+    pub bind: SocketAddr,
+    /// Data directory.
+    pub data_dir: PathBuf,
+    /// Operator token; `None` reads or generates `<data_dir>/operator-token`.
+    pub operator_token: Option<String>,
+    /// Master key as 64 hex digits; `None` reads or generates `<data_dir>/master.key`.
+    pub master_key_hex: Option<String>,
+    /// Worker tasks (0 = none: jobs wait until a worker step is run by hand, as the tests do).
+    pub workers: usize,
+    /// Request and upload limits.
+    pub limits: Limits,
+    /// Queue behaviour.
+    pub queue: QueueConfig,
+}
+
+/// Request and upload limits.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Largest document upload, bytes.
+    pub max_document_bytes: usize,
+    /// Largest document, pixels.
+    pub max_document_pixels: u64,
+    /// Largest JSON body, bytes.
+    pub max_body_bytes: usize,
+    /// Time until a response starts.
+    pub request_timeout: Duration,
+}
+
+/// Durable-queue behaviour.
+#[derive(Clone, Debug)]
+pub struct QueueConfig {
+    /// Lease a worker holds on a claimed job.
+    pub lease: Duration,
+    /// Attempts before a job fails.
+    pub max_attempts: u32,
+    /// How often an idle worker looks for work it was not told about (expired leases).
+    pub poll_interval: Duration,
+    /// How long running jobs get to stop on shutdown.
+    pub shutdown_grace: Duration,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_document_bytes: 20 * 1024 * 1024,
+            max_document_pixels: 16 * 1024 * 1024,
+            max_body_bytes: 1024 * 1024,
+            request_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+impl Default for QueueConfig {
+    fn default() -> Self {
+        Self {
+            lease: Duration::from_secs(30),
+            max_attempts: 3,
+            poll_interval: Duration::from_millis(500),
+            shutdown_grace: Duration::from_secs(20),
+        }
+    }
+}
+
+impl Config {
+    /// Defaults for everything but the data directory: port 8080 on loopback, one worker, generated secrets.
+    pub fn new(data_dir: impl Into<PathBuf>) -> Self {
+        Self {
+            bind: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            data_dir: data_dir.into(),
+            operator_token: None,
+            master_key_hex: None,
+            workers: 1,
+            limits: Limits::default(),
+            queue: QueueConfig::default(),
+        }
+    }
+
+    /// The path of the SQLite database.
+    pub fn database_path(&self) -> PathBuf {
+        self.data_dir.join("eyekey.db")
+    }
+}
+
+impl From<ServeArgs> for Config {
+    fn from(a: ServeArgs) -> Self {
+        Self {
+            bind: a.bind,
+            data_dir: a.data_dir,
+            operator_token: a.operator_token.filter(|t| !t.is_empty()),
+            master_key_hex: a.master_key.filter(|k| !k.is_empty()),
+            workers: a.workers,
+            limits: Limits {
+                max_document_bytes: a.max_document_bytes,
+                max_document_pixels: a.max_document_pixels,
+                max_body_bytes: a.max_body_bytes,
+                request_timeout: Duration::from_secs(a.request_timeout_secs.max(1)),
+            },
+            queue: QueueConfig {
+                lease: Duration::from_secs(a.lease_secs.max(1)),
+                max_attempts: a.max_attempts.max(1),
+                shutdown_grace: Duration::from_secs(a.shutdown_grace_secs),
+                ..QueueConfig::default()
+            },
+        }
+    }
+}

@@ -1,0 +1,386 @@
+//! Job execution: the worker pool, and the single worker step the tests drive by hand.
+//!
+//! A worker claims a job (see [`crate::service::store::jobs`]), loads and opens its inputs, and runs
+//! [`crate::pipeline::run_job`] on a blocking thread (the pipeline spreads its work over the rayon pool;
+//! tokio's worker threads never solve). Meanwhile the async side renews the lease every third of it,
+//! writes progress, and forwards a cancel request to the solver's flag. Output goes to
+//! `<data>/jobs/.tmp-<job>-<attempt>/` and is renamed to `<data>/jobs/<job>/` only when the bundle and
+//! its zip are complete, so a bundle is never visible half-written.
+//!
+//! Outcomes: success → `succeeded`; `PipelineError::Invalid` → `failed` at once (retrying cannot help);
+//! any other error or a panic → back to `queued` while attempts remain, else `failed`; a cancel request →
+//! `cancelled`. On shutdown, running jobs are cancelled and re-queued without counting the attempt.
+
+pub mod bundle;
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use tokio::task::JoinSet;
+
+use super::state::AppState;
+use super::store::{self, jobs::JobRow, jobs::JobState};
+use crate::display::DisplayGeometry;
+use crate::optics::profile::VisionProfile;
+use crate::pipeline::{run_job, EncodeOptions, JobSpec, PipelineError};
+
+/// A job id.
+pub type JobId = String;
+
+/// An observer profile a job was created with, pinned to the version current at creation.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ObserverRef {
+    /// The profile.
+    pub profile_id: String,
+    /// Its version.
+    pub version: i64,
+}
+
+/// Runs `workers` worker loops until shutdown.
+pub fn spawn_workers(state: &AppState, workers: usize) -> JoinSet<()> {
+    let mut set = JoinSet::new();
+    for n in 0..workers {
+        let state = state.clone();
+        set.spawn(async move { worker_loop(state, n).await });
+    }
+    set
+}
+
+async fn worker_loop(state: AppState, n: usize) {
+    tracing::debug!(worker = n, "worker started");
+    let mut shutdown = state.shutdown.clone();
+    while !state.shutting_down() {
+        match try_execute_next_job(&state).await {
+            Ok(Some(_)) => continue,
+            Ok(None) => {}
+            Err(e) => tracing::error!(worker = n, error = ?e, "worker step failed"),
+        }
+        // Idle: wake when a job is queued, when shutdown begins, or after the poll interval (to notice
+        // jobs whose lease expired).
+        tokio::select! {
+            _ = state.job_queued.notified() => {}
+            _ = crate::service::state::stopped(&mut shutdown) => {}
+            _ = tokio::time::sleep(state.config.queue.poll_interval) => {}
+        }
+    }
+    tracing::debug!(worker = n, "worker stopped");
+}
+
+/// One worker step: ends jobs whose lease expired with no attempts left, claims the oldest claimable
+/// job and runs it to the end of this attempt. `Ok(None)` when there was nothing to do.
+pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<JobId>> {
+    if state.shutting_down() {
+        return Ok(None);
+    }
+    let now = store::now_ms();
+    for row in store::jobs::fail_exhausted(&state.db, now).await? {
+        tracing::warn!(job = %row.id, state = %row.state, "lease expired with no attempts left");
+        metrics::counter!("eyekey_jobs_finished_total", "state" => row.state.clone()).increment(1);
+        state.publish(&row);
+    }
+    let Some(job) =
+        store::jobs::claim_next(&state.db, &state.instance_id, state.config.queue.lease, now)
+            .await?
+    else {
+        return Ok(None);
+    };
+    let id = job.id.clone();
+    execute_claimed(state, job).await?;
+    Ok(Some(id))
+}
+
+/// Why a load of a job's inputs failed.
+enum LoadError {
+    /// The job cannot run (an input was deleted, or does not fit): fail without retrying.
+    Fatal(String),
+    /// Something that may pass on retry (I/O).
+    Transient(anyhow::Error),
+}
+
+impl From<sqlx::Error> for LoadError {
+    fn from(e: sqlx::Error) -> Self {
+        Self::Transient(e.into())
+    }
+}
+
+/// Why the solver was asked to stop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stop {
+    None,
+    Cancel,
+    Shutdown,
+    LostLease,
+}
+
+/// Runs a job this worker has just claimed (its `attempts` is this attempt's number).
+pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()> {
+    state.publish(&job);
+    let attempt = job.attempts;
+    let lease = state.config.queue.lease;
+    tracing::info!(job = %job.id, attempt, "job started");
+    let spec = match load_spec(state, &job).await {
+        Ok(spec) => spec,
+        Err(LoadError::Fatal(msg)) => return end(state, &job, JobState::Failed, Some(&msg)).await,
+        Err(LoadError::Transient(e)) => return retry_or_fail(state, &job, &format!("{e:#}")).await,
+    };
+    // Renew the lease once before solving: it may have been cancelled, or lost, while claimed or loading.
+    match store::jobs::heartbeat(&state.db, &job.id, attempt, lease, 0.0).await? {
+        None => return Ok(()),
+        Some(true) => return end(state, &job, JobState::Cancelled, None).await,
+        Some(false) => {}
+    }
+
+    let jobs_dir = state.data_dir().join("jobs");
+    let tmp = jobs_dir.join(format!(".tmp-{}-{}", job.id, attempt));
+    let final_dir = jobs_dir.join(&job.id);
+    if tokio::fs::try_exists(&tmp).await.unwrap_or(false) {
+        tokio::fs::remove_dir_all(&tmp).await?;
+    }
+    tokio::fs::create_dir_all(&tmp).await?;
+
+    let cancel = Arc::new(AtomicBool::new(false));
+    let progress = Arc::new(AtomicU64::new(0f64.to_bits()));
+    let started = Instant::now();
+    let mut solver = tokio::task::spawn_blocking({
+        let (cancel, progress, tmp) = (cancel.clone(), progress.clone(), tmp.clone());
+        move || -> Result<(serde_json::Value, Vec<bundle::BundleFile>), PipelineError> {
+            let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
+            let output = run_job(&spec, &tmp, &report, &cancel)?;
+            let files = bundle::seal_bundle(&tmp)
+                .map_err(|e| PipelineError::Internal(format!("writing the bundle: {e}")))?;
+            Ok((output.evaluation, files))
+        }
+    });
+
+    let mut heartbeat = tokio::time::interval((lease / 3).max(Duration::from_millis(20)));
+    heartbeat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut shutdown = state.shutdown.clone();
+    let mut stop = Stop::None;
+    let mut published_progress = 0.0;
+    let outcome = loop {
+        tokio::select! {
+            r = &mut solver => break r,
+            _ = heartbeat.tick() => {
+                let p = f64::from_bits(progress.load(Ordering::Relaxed));
+                match store::jobs::heartbeat(&state.db, &job.id, attempt, lease, p).await {
+                    Ok(Some(cancel_requested)) => {
+                        if cancel_requested && stop == Stop::None {
+                            stop = Stop::Cancel;
+                            cancel.store(true, Ordering::Relaxed);
+                        }
+                        if p - published_progress >= 0.005 {
+                            published_progress = p;
+                            let mut row = job.clone();
+                            (row.state, row.progress) = ("running".into(), p);
+                            state.publish(&row);
+                        }
+                    }
+                    Ok(None) => {
+                        tracing::warn!(job = %job.id, attempt, "lost the lease; abandoning this attempt");
+                        stop = Stop::LostLease;
+                        cancel.store(true, Ordering::Relaxed);
+                    }
+                    // A failed heartbeat is retried on the next tick; the lease has slack for that.
+                    Err(e) => tracing::warn!(job = %job.id, error = %e, "heartbeat failed"),
+                }
+            }
+            _ = crate::service::state::stopped(&mut shutdown), if stop == Stop::None => {
+                stop = Stop::Shutdown;
+                cancel.store(true, Ordering::Relaxed);
+            }
+        }
+    };
+    let elapsed = started.elapsed();
+
+    let discard = |dir: std::path::PathBuf| async move {
+        if let Err(e) = tokio::fs::remove_dir_all(&dir).await {
+            tracing::warn!(dir = %dir.display(), error = %e, "could not remove a job's temporary output");
+        }
+    };
+    match (outcome, stop) {
+        (_, Stop::LostLease) => discard(tmp).await,
+        (Ok(Ok((evaluation, files))), _) => {
+            if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
+                // Left by an earlier attempt that renamed its output but died before recording it.
+                tokio::fs::remove_dir_all(&final_dir).await?;
+            }
+            tokio::fs::rename(&tmp, &final_dir).await?;
+            let success = store::jobs::Success {
+                evaluation_summary: summarise(&evaluation),
+                bundle_path: format!("jobs/{}", job.id),
+                bundle_files: serde_json::to_string(&files)?,
+                solve_ms: elapsed.as_millis() as i64,
+            };
+            if store::jobs::mark_succeeded(&state.db, &job.id, attempt, &success).await? {
+                metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded")
+                    .record(elapsed.as_secs_f64());
+                metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded")
+                    .increment(1);
+                tracing::info!(job = %job.id, attempt, seconds = elapsed.as_secs_f64(), "job succeeded");
+                publish_current(state, &job.id).await;
+            } else {
+                tracing::warn!(job = %job.id, attempt, "finished after losing the job; result dropped");
+            }
+        }
+        (Ok(Err(_)) | Err(_), Stop::Shutdown) => {
+            discard(tmp).await;
+            store::jobs::requeue(&state.db, &job.id, attempt, None, true).await?;
+            tracing::info!(job = %job.id, "shutting down: job re-queued");
+            publish_current(state, &job.id).await;
+        }
+        (Ok(Err(_)), Stop::Cancel) | (Ok(Err(PipelineError::Cancelled)), _) => {
+            discard(tmp).await;
+            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "cancelled")
+                .record(elapsed.as_secs_f64());
+            end(state, &job, JobState::Cancelled, None).await?;
+        }
+        (Ok(Err(PipelineError::Invalid(msg))), _) => {
+            discard(tmp).await;
+            end(
+                state,
+                &job,
+                JobState::Failed,
+                Some(&format!("invalid job: {msg}")),
+            )
+            .await?;
+        }
+        (Ok(Err(e)), _) => {
+            discard(tmp).await;
+            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "error")
+                .record(elapsed.as_secs_f64());
+            retry_or_fail(state, &job, &e.to_string()).await?;
+        }
+        (Err(join_error), _) => {
+            discard(tmp).await;
+            tracing::error!(job = %job.id, error = %join_error, "the encoder panicked");
+            retry_or_fail(state, &job, "the encoder crashed (internal error)").await?;
+        }
+    }
+    Ok(())
+}
+
+/// The part of the evaluation stored with the job: its `summary` member if it has one, else the whole
+/// report when it is small.
+fn summarise(evaluation: &serde_json::Value) -> Option<String> {
+    let v = evaluation.get("summary").unwrap_or(evaluation);
+    if v.is_null() {
+        return None;
+    }
+    let text = serde_json::to_string(v).ok()?;
+    (text.len() <= 64 * 1024).then_some(text)
+}
+
+async fn publish_current(state: &AppState, id: &str) {
+    if let Ok(Some(row)) = store::jobs::get(&state.db, id).await {
+        state.publish(&row);
+    }
+}
+
+async fn end(
+    state: &AppState,
+    job: &JobRow,
+    to: JobState,
+    error: Option<&str>,
+) -> anyhow::Result<()> {
+    if store::jobs::mark_ended(&state.db, &job.id, job.attempts, to, error).await? {
+        metrics::counter!("eyekey_jobs_finished_total", "state" => to.as_str()).increment(1);
+        tracing::info!(job = %job.id, attempt = job.attempts, state = to.as_str(), error, "job ended");
+        publish_current(state, &job.id).await;
+    }
+    Ok(())
+}
+
+async fn retry_or_fail(state: &AppState, job: &JobRow, error: &str) -> anyhow::Result<()> {
+    let message = format!("attempt {} of {}: {error}", job.attempts, job.max_attempts);
+    if job.attempts < job.max_attempts {
+        tracing::warn!(job = %job.id, error = %message, "job attempt failed; re-queued");
+        store::jobs::requeue(&state.db, &job.id, job.attempts, Some(&message), false).await?;
+        publish_current(state, &job.id).await;
+        state.job_queued.notify_one();
+        Ok(())
+    } else {
+        end(state, job, JobState::Failed, Some(&message)).await
+    }
+}
+
+async fn open_profile(
+    state: &AppState,
+    id: &str,
+    version: i64,
+    role: &str,
+) -> Result<VisionProfile, LoadError> {
+    let row = store::profiles::get_version(&state.db, id, version)
+        .await?
+        .ok_or_else(|| {
+            LoadError::Fatal(format!(
+                "the {role} profile {id} (version {version}) was deleted"
+            ))
+        })?;
+    let plain = row
+        .open(&state.master_key)
+        .map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))?;
+    let text = String::from_utf8(plain)
+        .map_err(|_| LoadError::Fatal(format!("{role} profile {id} is not text")))?;
+    VisionProfile::from_json(&text)
+        .map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))
+}
+
+async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::RgbImage, LoadError> {
+    let doc = store::documents::get(&state.db, id)
+        .await?
+        .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} does not exist")))?;
+    let path = state.data_dir().join(&doc.path);
+    let bytes = tokio::fs::read(&path)
+        .await
+        .map_err(|e| LoadError::Transient(anyhow::anyhow!("reading {}: {e}", path.display())))?;
+    let max_pixels = state.config.limits.max_document_pixels;
+    let role = role.to_string();
+    tokio::task::spawn_blocking(move || {
+        let format = super::images::format_of_content_type(Some(&doc.content_type))
+            .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
+        let header = super::images::inspect(
+            &bytes,
+            format,
+            max_pixels.max((doc.width * doc.height) as u64),
+        )
+        .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
+        let image = super::images::decode(&bytes, &header)
+            .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
+        Ok(image.to_rgb8())
+    })
+    .await
+    .map_err(|e| LoadError::Transient(e.into()))?
+}
+
+async fn load_spec(state: &AppState, job: &JobRow) -> Result<JobSpec, LoadError> {
+    let display = store::displays::get(&state.db, &job.display_id)
+        .await?
+        .ok_or_else(|| LoadError::Fatal(format!("the display {} was deleted", job.display_id)))?;
+    let geometry: DisplayGeometry = serde_json::from_str(&display.geometry)
+        .map_err(|e| LoadError::Fatal(format!("stored display geometry: {e}")))?;
+    let options: EncodeOptions = serde_json::from_str(&job.options)
+        .map_err(|e| LoadError::Fatal(format!("stored options: {e}")))?;
+    let observer_refs: Vec<ObserverRef> = serde_json::from_str(&job.observers)
+        .map_err(|e| LoadError::Fatal(format!("stored observers: {e}")))?;
+    let target = open_profile(state, &job.profile_id, job.profile_version, "target").await?;
+    let mut observers = Vec::with_capacity(observer_refs.len());
+    for o in &observer_refs {
+        observers.push(open_profile(state, &o.profile_id, o.version, "observer").await?);
+    }
+    let document = load_image(state, &job.document_id, "document").await?;
+    let decoy = match &job.decoy_document_id {
+        Some(id) => Some(load_image(state, id, "decoy").await?),
+        None => None,
+    };
+    Ok(JobSpec {
+        display: geometry,
+        target,
+        target_label: format!("profile {} version {}", job.profile_id, job.profile_version),
+        observers,
+        document,
+        decoy,
+        options,
+    })
+}

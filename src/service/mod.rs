@@ -1,0 +1,33 @@
+//! `eyekey serve`: the networked service (DESIGN §5).
+//!
+//! REST + JSON under `/v1` with an OpenAPI document (`/openapi.json`, Swagger UI at `/docs`); SQLite
+//! (WAL) with embedded migrations; vision profiles sealed under a master key; a durable job queue in the
+//! database whose workers run the encoder pipeline on the rayon pool; frame bundles served to each
+//! display with its own token.
+//!
+//! Layout: [`config`] (flags and environment), [`app`] (build, run, shutdown), [`routes`] (one module
+//! per resource), [`auth`] (operator and display tokens), [`crypto`], [`store`] (SQL), [`jobs`] (the
+//! worker), [`error`] (the one HTTP error shape).
+
+pub mod app;
+pub mod auth;
+pub mod config;
+pub mod crypto;
+pub mod error;
+pub mod images;
+pub mod jobs;
+pub mod openapi;
+pub mod routes;
+pub mod state;
+pub mod store;
+
+pub use app::{Application, ShutdownHandle};
+pub use config::{Config, ServeArgs};
+pub use jobs::try_execute_next_job;
+pub use state::AppState;
+
+/// Runs `eyekey serve` until SIGINT or SIGTERM.
+pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
+    let app = Application::build(Config::from(args)).await?;
+    app.run_until_stopped().await
+}

@@ -1,0 +1,90 @@
+//! The OpenAPI document, generated from the handlers' `#[utoipa::path]` annotations.
+//!
+//! Served at `/openapi.json` (with Swagger UI at `/docs`) and committed at `openapi/openapi.json`; the
+//! test suite fails when the two differ. Regenerate with
+//! `EYEKEY_WRITE_OPENAPI=1 cargo test --test api openapi`.
+
+use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
+use utoipa::{Modify, OpenApi};
+
+use super::routes;
+
+/// The service's API.
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "eyekey",
+        description = "Shows a document on a light-field display so that only one enrolled person can read it. \
+            Operators (operator token) enrol vision profiles, register displays, upload documents, run encoding \
+            jobs and read their evaluation; each display client (its own token) fetches the frame bundles of its \
+            own jobs. Every error body is `{\"error\": {\"code\", \"message\", \"field\"}}`."
+    ),
+    paths(
+        routes::health::healthz,
+        routes::health::readyz,
+        routes::metrics::scrape,
+        routes::profiles::enrol_profile,
+        routes::profiles::list_profiles,
+        routes::profiles::get_profile,
+        routes::profiles::reenrol_profile,
+        routes::profiles::delete_profile,
+        routes::displays::register_display,
+        routes::displays::list_displays,
+        routes::displays::get_display,
+        routes::displays::rotate_token,
+        routes::displays::delete_display,
+        routes::documents::upload_document,
+        routes::documents::list_documents,
+        routes::documents::get_document,
+        routes::jobs::create_job,
+        routes::jobs::list_jobs,
+        routes::jobs::get_job,
+        routes::jobs::cancel_job,
+        routes::jobs::job_events,
+        routes::evaluation::get_evaluation,
+        routes::evaluation::list_views,
+        routes::evaluation::get_view,
+        routes::frames::list_frame_jobs,
+        routes::frames::get_frame_job,
+        routes::frames::download_bundle,
+        routes::frames::download_file,
+        routes::frames::frame_events,
+        routes::audit::list_audit,
+    ),
+    modifiers(&BearerSchemes),
+    tags(
+        (name = "profiles", description = "Enrolled vision profiles (operator)"),
+        (name = "displays", description = "Registered light-field displays (operator)"),
+        (name = "documents", description = "Uploaded documents (operator)"),
+        (name = "jobs", description = "Encoding jobs (operator)"),
+        (name = "evaluation", description = "Reports and simulated views of succeeded jobs (operator)"),
+        (name = "frames", description = "Frame bundles for a display client (display token)"),
+        (name = "audit", description = "Append-only audit log (operator)"),
+        (name = "operations", description = "Health, readiness and metrics (no token)"),
+    )
+)]
+pub struct ApiDoc;
+
+/// Declares the two bearer-token schemes.
+struct BearerSchemes;
+
+impl Modify for BearerSchemes {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        let components = openapi.components.get_or_insert_with(Default::default);
+        let mut operator = Http::new(HttpAuthScheme::Bearer);
+        operator.description =
+            Some("The operator token (EYEKEY_OPERATOR_TOKEN or <data-dir>/operator-token)".into());
+        components.add_security_scheme("operator", SecurityScheme::Http(operator));
+        let mut display = Http::new(HttpAuthScheme::Bearer);
+        display.description =
+            Some("A display's access token, shown once at registration or rotation".into());
+        components.add_security_scheme("display", SecurityScheme::Http(display));
+    }
+}
+
+/// The document as committed: pretty JSON with a trailing newline.
+pub fn document_json() -> String {
+    let mut text = ApiDoc::openapi().to_pretty_json().unwrap_or_default();
+    text.push('\n');
+    text
+}

@@ -1,0 +1,230 @@
+//! `/v1/documents`: uploaded documents (operator only).
+//!
+//! Upload is the raw image as the request body with `Content-Type: image/png` or `image/jpeg` (no
+//! multipart). The header is checked and the pixel count limited before any pixel is decoded; the file
+//! is then fully decoded under memory limits, so truncated files, wrong types and decompression bombs
+//! are refused at upload rather than when a job runs.
+
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{DefaultBodyLimit, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::routing::get;
+use axum::{Json, Router};
+use chrono::{DateTime, Utc};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use uuid::Uuid;
+
+use super::{id_text, next_cursor, PageQuery};
+use crate::service::auth::{Operator, OPERATOR};
+use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
+use crate::service::images::{self, ImageProblem};
+use crate::service::state::AppState;
+use crate::service::store::{self, documents::DocumentRow, to_time};
+
+/// Routes of this resource; uploads get their own body limit (`max_document_bytes`).
+pub fn router(max_document_bytes: usize) -> Router<AppState> {
+    Router::new()
+        .route(
+            "/v1/documents",
+            get(list_documents)
+                .post(upload_document)
+                .layer(DefaultBodyLimit::max(max_document_bytes)),
+        )
+        .route("/v1/documents/{id}", get(get_document))
+}
+
+/// An uploaded document's metadata.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct DocumentView {
+    /// Id.
+    pub id: Uuid,
+    /// SHA-256 of the uploaded bytes, hex.
+    pub sha256: String,
+    /// `image/png` or `image/jpeg`.
+    pub content_type: String,
+    /// Size of the upload, bytes.
+    pub bytes: i64,
+    /// Width, pixels.
+    pub width: i64,
+    /// Height, pixels.
+    pub height: i64,
+    /// Upload time.
+    pub created_at: DateTime<Utc>,
+}
+
+/// A page of documents.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct DocumentList {
+    /// Documents, newest first.
+    pub items: Vec<DocumentView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+impl From<&DocumentRow> for DocumentView {
+    fn from(r: &DocumentRow) -> Self {
+        Self {
+            id: r.id.parse().unwrap_or_default(),
+            sha256: r.sha256.clone(),
+            content_type: r.content_type.clone(),
+            bytes: r.bytes,
+            width: r.width,
+            height: r.height,
+            created_at: to_time(r.created_at),
+        }
+    }
+}
+
+fn problem(p: ImageProblem) -> ApiError {
+    match p {
+        ImageProblem::UnsupportedType(_) => ApiError::UnsupportedMediaType(p.to_string()),
+        ImageProblem::TooManyPixels { .. } => ApiError::TooLarge {
+            field: Some("pixels".into()),
+            message: p.to_string(),
+        },
+        _ => ApiError::Invalid {
+            field: Some("body".into()),
+            message: p.to_string(),
+        },
+    }
+}
+
+/// Upload a document.
+///
+/// Send the image itself as the body with `Content-Type: image/png` or `image/jpeg`. Refused: other
+/// types (415), bodies over the byte limit or images over the pixel limit (413, checked from the header
+/// before decoding), and files that are truncated, corrupt or not of the declared type (422).
+#[utoipa::path(
+    post, path = "/v1/documents", tag = "documents",
+    request_body(
+        description = "The image file itself",
+        content(("image/png"), ("image/jpeg"))
+    ),
+    responses(
+        (status = 201, description = "Stored", body = DocumentView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 413, description = "Too many bytes or pixels", body = ErrorBody),
+        (status = 415, description = "Not PNG or JPEG", body = ErrorBody),
+        (status = 422, description = "Truncated, corrupt or mislabelled image", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn upload_document(
+    State(state): State<AppState>,
+    _: Operator,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
+    let content_type = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok());
+    let format = images::format_of_content_type(content_type).map_err(problem)?;
+    let bytes = body.map_err(|e| {
+        if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            ApiError::TooLarge {
+                field: Some("body".into()),
+                message: format!(
+                    "the document exceeds {} bytes",
+                    state.config.limits.max_document_bytes
+                ),
+            }
+        } else {
+            ApiError::from(e)
+        }
+    })?;
+    if bytes.is_empty() {
+        return Err(ApiError::invalid(
+            "body",
+            "the body is empty; send the image file",
+        ));
+    }
+    let max_pixels = state.config.limits.max_document_pixels;
+    let (header, bytes) = tokio::task::spawn_blocking(move || {
+        let header = images::inspect(&bytes, format, max_pixels)?;
+        images::decode(&bytes, &header)?;
+        Ok::<_, ImageProblem>((header, bytes))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(problem)?;
+
+    let id = id_text(&Uuid::new_v4());
+    let sha256 = hex::encode(Sha256::digest(&bytes));
+    let relative = format!("documents/{id}.{}", header.extension());
+    let path = state.data_dir().join(&relative);
+    let part = state.data_dir().join(format!("documents/.{id}.part"));
+    tokio::fs::write(&part, &bytes)
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))?;
+    tokio::fs::rename(&part, &path)
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))?;
+    let row = store::documents::insert(
+        &state.db,
+        &store::documents::NewDocument {
+            id: &id,
+            sha256: &sha256,
+            content_type: header.content_type(),
+            bytes: bytes.len() as i64,
+            width: header.width.into(),
+            height: header.height.into(),
+            path: &relative,
+        },
+    )
+    .await?;
+    store::audit::record(
+        &state.db,
+        OPERATOR,
+        "document.upload",
+        &format!("documents/{id}"),
+    )
+    .await?;
+    Ok((StatusCode::CREATED, Json(DocumentView::from(&row))))
+}
+
+/// Read a document's metadata.
+#[utoipa::path(
+    get, path = "/v1/documents/{id}", tag = "documents",
+    params(("id" = Uuid, Path, description = "Document id")),
+    responses(
+        (status = 200, description = "The document's metadata", body = DocumentView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such document", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn get_document(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Json<DocumentView>, ApiError> {
+    let row = store::documents::get(&state.db, &id_text(&id))
+        .await?
+        .ok_or(ApiError::NotFound("document"))?;
+    Ok(Json(DocumentView::from(&row)))
+}
+
+/// List documents, newest first.
+#[utoipa::path(
+    get, path = "/v1/documents", tag = "documents",
+    params(PageQuery),
+    responses(
+        (status = 200, description = "A page of documents", body = DocumentList),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn list_documents(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiQuery(page): ApiQuery<PageQuery>,
+) -> Result<Json<DocumentList>, ApiError> {
+    let (limit, cursor) = page.parse()?;
+    let rows = store::documents::list(&state.db, limit, cursor.as_ref()).await?;
+    Ok(Json(DocumentList {
+        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
+        items: rows.iter().map(DocumentView::from).collect(),
+    }))
+}

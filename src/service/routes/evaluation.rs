@@ -1,0 +1,130 @@
+//! Evaluation of a succeeded job (operator only): the report and the simulated views of the target,
+//! the observers and a sample of the population.
+
+use axum::extract::State;
+use axum::response::Response;
+use axum::routing::get;
+use axum::{Json, Router};
+use serde::{Deserialize, Serialize};
+use uuid::Uuid;
+
+use super::{id_text, stream_file};
+use crate::service::auth::Operator;
+use crate::service::error::{ApiError, ApiPath, ErrorBody};
+use crate::service::jobs::bundle::is_plain_file_name;
+use crate::service::state::AppState;
+use crate::service::store::{self, jobs::JobState};
+
+/// Routes of this resource.
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/jobs/{id}/evaluation", get(get_evaluation))
+        .route("/v1/jobs/{id}/views", get(list_views))
+        .route("/v1/jobs/{id}/views/{name}", get(get_view))
+}
+
+/// The simulated views of a job.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ViewList {
+    /// File names, for `/v1/jobs/{id}/views/{name}`.
+    pub names: Vec<String>,
+}
+
+async fn output_dir(state: &AppState, id: &Uuid) -> Result<std::path::PathBuf, ApiError> {
+    let job = store::jobs::get(&state.db, &id_text(id))
+        .await?
+        .ok_or(ApiError::NotFound("job"))?;
+    match (job.job_state(), &job.bundle_path) {
+        (JobState::Succeeded, Some(path)) => Ok(state.data_dir().join(path)),
+        (s, _) => Err(ApiError::Conflict {
+            code: "job_not_succeeded",
+            message: format!(
+                "the job is {}; its evaluation exists once it has succeeded",
+                s.as_str()
+            ),
+        }),
+    }
+}
+
+/// The job's evaluation report (`report.json`): fidelity for the target, legibility for everybody else.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/evaluation", tag = "evaluation",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The report", content_type = "application/json", body = Object),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has not succeeded", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn get_evaluation(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Response, ApiError> {
+    let dir = output_dir(&state, &id).await?;
+    stream_file(
+        &dir.join("report.json"),
+        "application/json",
+        None,
+        "evaluation report",
+    )
+    .await
+}
+
+/// Names of the job's simulated views (PNG).
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/views", tag = "evaluation",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "View names", body = ViewList),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has not succeeded", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn list_views(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Json<ViewList>, ApiError> {
+    let dir = output_dir(&state, &id).await?.join("views");
+    let mut names = Vec::new();
+    if let Ok(mut entries) = tokio::fs::read_dir(&dir).await {
+        while let Ok(Some(e)) = entries.next_entry().await {
+            if let Ok(name) = e.file_name().into_string() {
+                if name.ends_with(".png") && is_plain_file_name(&name) {
+                    names.push(name);
+                }
+            }
+        }
+    }
+    names.sort();
+    Ok(Json(ViewList { names }))
+}
+
+/// One simulated view: what the target, an observer or a sampled person would see.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/views/{name}", tag = "evaluation",
+    params(("id" = Uuid, Path, description = "Job id"), ("name" = String, Path, description = "View file name")),
+    responses(
+        (status = 200, description = "The view", content_type = "image/png", body = Vec<u8>),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job or view", body = ErrorBody),
+        (status = 409, description = "The job has not succeeded", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn get_view(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath((id, name)): ApiPath<(Uuid, String)>,
+) -> Result<Response, ApiError> {
+    if !is_plain_file_name(&name) || !name.ends_with(".png") {
+        return Err(ApiError::NotFound("view"));
+    }
+    let dir = output_dir(&state, &id).await?;
+    stream_file(&dir.join("views").join(&name), "image/png", None, "view").await
+}

@@ -1,0 +1,561 @@
+//! `/v1/jobs`: encoding jobs (operator only): create (idempotent), read, list, cancel, follow.
+
+use std::convert::Infallible;
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use chrono::{DateTime, Utc};
+use futures::Stream;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use tokio::sync::broadcast::error::RecvError;
+use uuid::Uuid;
+
+use super::{id_text, next_cursor, PageQuery};
+use crate::pipeline::{EncodeOptions, Method};
+use crate::service::auth::{Operator, OPERATOR};
+use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
+use crate::service::jobs::bundle::BundleFile;
+use crate::service::jobs::ObserverRef;
+use crate::service::state::{AppState, JobEvent};
+use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
+use crate::service::store::{self, to_time};
+
+/// Routes of this resource.
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/v1/jobs", get(list_jobs).post(create_job))
+        .route("/v1/jobs/{id}", get(get_job))
+        .route("/v1/jobs/{id}/cancel", post(cancel_job))
+        .route("/v1/jobs/{id}/events", get(job_events))
+}
+
+/// Body of a job creation.
+#[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateJob {
+    /// The display the frames are for.
+    pub display_id: Uuid,
+    /// The document to show.
+    pub document_id: Uuid,
+    /// The enrolled person who must read it (its current version is used and recorded).
+    pub profile_id: Uuid,
+    /// Encoder options; every field has a default.
+    #[serde(default)]
+    pub options: Option<EncodeOptions>,
+    /// Enrolled people who must not read it (representative observers), at most 16.
+    #[serde(default)]
+    pub observer_profile_ids: Vec<Uuid>,
+    /// An image to show everybody else instead (same aspect ratio as the document).
+    #[serde(default)]
+    pub decoy_document_id: Option<Uuid>,
+}
+
+/// Times of a job.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct JobTimings {
+    /// Creation.
+    pub created_at: DateTime<Utc>,
+    /// First claim by a worker.
+    pub started_at: Option<DateTime<Utc>>,
+    /// End (any terminal state).
+    pub finished_at: Option<DateTime<Utc>>,
+    /// Wall time of the successful attempt's solve, seconds.
+    pub solve_seconds: Option<f64>,
+}
+
+/// A job as the operator sees it.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct JobView {
+    /// Id.
+    pub id: Uuid,
+    /// State.
+    pub state: JobState,
+    /// Progress of the current attempt, 0–1.
+    pub progress: f64,
+    /// Attempts so far.
+    pub attempts: i64,
+    /// Attempts allowed.
+    pub max_attempts: i64,
+    /// A cancel was asked for (takes effect between solver iterations).
+    pub cancel_requested: bool,
+    /// Display.
+    pub display_id: Uuid,
+    /// Document.
+    pub document_id: Uuid,
+    /// Decoy document.
+    pub decoy_document_id: Option<Uuid>,
+    /// Target profile.
+    pub profile_id: Uuid,
+    /// Version of the target profile this job uses.
+    pub profile_version: i64,
+    /// Observer profiles and the versions this job uses.
+    pub observers: Vec<ObserverRef>,
+    /// Encoder.
+    pub method: Method,
+    /// Options in full (defaults filled in).
+    pub options: EncodeOptions,
+    /// Last error (of the final attempt when failed, else of an earlier retried attempt).
+    pub last_error: Option<String>,
+    /// Summary of the evaluation report once succeeded (the full report: `/v1/jobs/{id}/evaluation`).
+    #[schema(value_type = Option<Object>)]
+    pub evaluation_summary: Option<serde_json::Value>,
+    /// Files of the frame bundle once succeeded.
+    pub bundle_files: Option<Vec<BundleFile>>,
+    /// Times.
+    pub timings: JobTimings,
+}
+
+/// A page of jobs.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct JobList {
+    /// Jobs, newest first.
+    pub items: Vec<JobView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+/// Filters and paging of a job listing.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct JobListQuery {
+    /// Only jobs in this state.
+    pub state: Option<JobState>,
+    /// Only jobs for this display.
+    pub display_id: Option<Uuid>,
+    /// Items per page (1–200, default 50).
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    pub cursor: Option<String>,
+}
+
+fn parse_id(s: &str) -> Uuid {
+    s.parse().unwrap_or_default()
+}
+
+impl TryFrom<&JobRow> for JobView {
+    type Error = ApiError;
+    fn try_from(r: &JobRow) -> Result<Self, ApiError> {
+        let internal = |what: &str, e: serde_json::Error| {
+            ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"))
+        };
+        let options: EncodeOptions =
+            serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
+        Ok(Self {
+            id: parse_id(&r.id),
+            state: r.job_state(),
+            progress: r.progress,
+            attempts: r.attempts,
+            max_attempts: r.max_attempts,
+            cancel_requested: r.cancel_requested,
+            display_id: parse_id(&r.display_id),
+            document_id: parse_id(&r.document_id),
+            decoy_document_id: r.decoy_document_id.as_deref().map(parse_id),
+            profile_id: parse_id(&r.profile_id),
+            profile_version: r.profile_version,
+            observers: serde_json::from_str(&r.observers).map_err(|e| internal("observers", e))?,
+            method: options.method,
+            options,
+            last_error: r.last_error.clone(),
+            evaluation_summary: r
+                .evaluation_summary
+                .as_deref()
+                .and_then(|s| serde_json::from_str(s).ok()),
+            bundle_files: r
+                .bundle_files
+                .as_deref()
+                .and_then(|s| serde_json::from_str(s).ok()),
+            timings: JobTimings {
+                created_at: to_time(r.created_at),
+                started_at: r.started_at.map(to_time),
+                finished_at: r.finished_at.map(to_time),
+                solve_seconds: r.solve_ms.map(|ms| ms as f64 / 1000.0),
+            },
+        })
+    }
+}
+
+/// Bounds that keep one job from monopolising the service; the pipeline checks the physics.
+fn check_options(o: &EncodeOptions) -> Result<(), ApiError> {
+    let bound = |field: &str, v: u64, lo: u64, hi: u64| {
+        if (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(ApiError::invalid(
+                format!("options.{field}"),
+                format!("{field} must be within {lo}..={hi}, got {v}"),
+            ))
+        }
+    };
+    bound("max_iterations", o.max_iterations.into(), 1, 100_000)?;
+    bound("sub_rays", o.sub_rays.into(), 1, 1024)?;
+    bound("population_decoys", o.population_decoys.into(), 0, 64)?;
+    bound(
+        "evaluation_population",
+        o.evaluation_population.into(),
+        0,
+        1000,
+    )?;
+    for (field, v) in [
+        ("tolerance", o.tolerance),
+        ("decoy_weight", o.decoy_weight),
+        ("lambda_w", o.lambda_w),
+        ("lambda_c", o.lambda_c),
+    ] {
+        if !v.is_finite() || v < 0.0 {
+            return Err(ApiError::invalid(
+                format!("options.{field}"),
+                format!("{field} must be finite and ≥ 0, got {v}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
+    let Some(v) = headers.get("idempotency-key") else {
+        return Ok(None);
+    };
+    let key = v
+        .to_str()
+        .ok()
+        .map(str::trim)
+        .filter(|k| !k.is_empty() && k.len() <= 200);
+    match key {
+        Some(k) => Ok(Some(k.to_string())),
+        None => Err(ApiError::invalid(
+            "Idempotency-Key",
+            "the Idempotency-Key header must be 1 to 200 visible ASCII characters",
+        )),
+    }
+}
+
+/// Create a job.
+///
+/// With an `Idempotency-Key` header, repeating the same request returns the job created the first time
+/// (200 instead of 201); the same key with a different body is a 409. The target's and observers'
+/// current profile versions are recorded in the job.
+#[utoipa::path(
+    post, path = "/v1/jobs", tag = "jobs",
+    request_body = CreateJob,
+    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries of this request safe")),
+    responses(
+        (status = 201, description = "Queued", body = JobView),
+        (status = 200, description = "Same key and body as an earlier request: that job", body = JobView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 409, description = "The key was used with a different body", body = ErrorBody),
+        (status = 422, description = "A referenced resource does not exist, or bad options", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn create_job(
+    State(state): State<AppState>,
+    _: Operator,
+    headers: HeaderMap,
+    ApiJson(body): ApiJson<CreateJob>,
+) -> Result<Response, ApiError> {
+    let key = idempotency_key(&headers)?;
+    let options = body.options.clone().unwrap_or_default();
+    check_options(&options)?;
+    if body.observer_profile_ids.len() > 16 {
+        return Err(ApiError::invalid(
+            "observer_profile_ids",
+            "at most 16 observers",
+        ));
+    }
+    // The canonical request (options filled in) identifies "the same request" for idempotency.
+    let canonical = CreateJob {
+        options: Some(options.clone()),
+        ..body.clone()
+    };
+    let request_hash = hex::encode(Sha256::digest(
+        serde_json::to_vec(&canonical).map_err(|e| ApiError::Internal(e.into()))?,
+    ));
+
+    let db = &state.db;
+    store::displays::get(db, &id_text(&body.display_id))
+        .await?
+        .ok_or_else(|| ApiError::invalid("display_id", "no such display"))?;
+    store::documents::get(db, &id_text(&body.document_id))
+        .await?
+        .ok_or_else(|| ApiError::invalid("document_id", "no such document"))?;
+    if let Some(decoy) = &body.decoy_document_id {
+        store::documents::get(db, &id_text(decoy))
+            .await?
+            .ok_or_else(|| ApiError::invalid("decoy_document_id", "no such document"))?;
+    }
+    let target = store::profiles::get(db, &id_text(&body.profile_id))
+        .await?
+        .ok_or_else(|| ApiError::invalid("profile_id", "no such profile"))?;
+    let mut observers = Vec::with_capacity(body.observer_profile_ids.len());
+    for (i, id) in body.observer_profile_ids.iter().enumerate() {
+        let p = store::profiles::get(db, &id_text(id))
+            .await?
+            .ok_or_else(|| {
+                ApiError::invalid(format!("observer_profile_ids[{i}]"), "no such profile")
+            })?;
+        observers.push(ObserverRef {
+            profile_id: p.id,
+            version: p.current_version,
+        });
+    }
+    let new = NewJob {
+        id: id_text(&Uuid::new_v4()),
+        display_id: id_text(&body.display_id),
+        document_id: id_text(&body.document_id),
+        decoy_document_id: body.decoy_document_id.as_ref().map(id_text),
+        profile_id: target.id,
+        profile_version: target.current_version,
+        observers: to_json(&observers)?,
+        method: to_json(&options.method)?.trim_matches('"').to_string(),
+        options: to_json(&options)?,
+        max_attempts: state.config.queue.max_attempts.into(),
+        idempotency_key: key,
+        request_hash,
+    };
+    let (status, row) = match store::jobs::enqueue(db, &new).await? {
+        Enqueued::Created(row) => {
+            store::audit::record(db, OPERATOR, "job.create", &format!("jobs/{}", row.id)).await?;
+            state.publish(&row);
+            state.job_queued.notify_one();
+            (StatusCode::CREATED, row)
+        }
+        Enqueued::Existing(row) => (StatusCode::OK, row),
+        Enqueued::KeyReused(row) => {
+            return Err(ApiError::Conflict {
+                code: "idempotency_key_reused",
+                message: format!(
+                    "this Idempotency-Key was used for job {} with a different request",
+                    row.id
+                ),
+            })
+        }
+    };
+    let mut response = (status, Json(JobView::try_from(&row)?)).into_response();
+    if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
+        response.headers_mut().insert(header::LOCATION, location);
+    }
+    Ok(response)
+}
+
+fn to_json<T: Serialize>(v: &T) -> Result<String, ApiError> {
+    serde_json::to_string(v).map_err(|e| ApiError::Internal(e.into()))
+}
+
+async fn load(state: &AppState, id: &Uuid) -> Result<JobRow, ApiError> {
+    store::jobs::get(&state.db, &id_text(id))
+        .await?
+        .ok_or(ApiError::NotFound("job"))
+}
+
+/// Read a job: state, progress, attempts, timings, last error and evaluation summary.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn get_job(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Json<JobView>, ApiError> {
+    Ok(Json(JobView::try_from(&load(&state, &id).await?)?))
+}
+
+/// List jobs, newest first, optionally by state and display.
+#[utoipa::path(
+    get, path = "/v1/jobs", tag = "jobs",
+    params(JobListQuery),
+    responses(
+        (status = 200, description = "A page of jobs", body = JobList),
+        (status = 400, description = "Unknown state", body = ErrorBody),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn list_jobs(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiQuery(q): ApiQuery<JobListQuery>,
+) -> Result<Json<JobList>, ApiError> {
+    let (limit, cursor) = PageQuery {
+        limit: q.limit,
+        cursor: q.cursor,
+    }
+    .parse()?;
+    let filter = JobFilter {
+        state: q.state,
+        display_id: q.display_id.as_ref().map(id_text),
+    };
+    let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
+    Ok(Json(JobList {
+        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
+        items: rows
+            .iter()
+            .map(JobView::try_from)
+            .collect::<Result<_, _>>()?,
+    }))
+}
+
+/// Cancel a job (best effort).
+///
+/// A queued job is cancelled at once (200). A running job is asked to stop (202, `cancel_requested`);
+/// its worker stops between solver iterations and the job ends `cancelled` (or `succeeded`, if it
+/// finished first). Cancelling a cancelled job is a no-op; a succeeded or failed one is a 409.
+#[utoipa::path(
+    post, path = "/v1/jobs/{id}/cancel", tag = "jobs",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "Cancelled", body = JobView),
+        (status = 202, description = "Running; asked to stop", body = JobView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "Already succeeded or failed", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn cancel_job(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<(StatusCode, Json<JobView>), ApiError> {
+    let row = store::jobs::request_cancel(&state.db, &id_text(&id))
+        .await?
+        .ok_or(ApiError::NotFound("job"))?;
+    let status = match row.job_state() {
+        JobState::Cancelled => StatusCode::OK,
+        JobState::Running => StatusCode::ACCEPTED,
+        other => {
+            return Err(ApiError::Conflict {
+                code: "job_finished",
+                message: format!("the job has already {}", other.as_str()),
+            })
+        }
+    };
+    store::audit::record(
+        &state.db,
+        OPERATOR,
+        "job.cancel",
+        &format!("jobs/{}", row.id),
+    )
+    .await?;
+    state.publish(&row);
+    Ok((status, Json(JobView::try_from(&row)?)))
+}
+
+/// Follow a job: server-sent events.
+///
+/// Sends the job (as in `GET /v1/jobs/{id}`) at once, then whenever it changes: event `state` when the
+/// state changes, `progress` when only progress does. The stream ends after a terminal state.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/events", tag = "jobs",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "An event stream of JobView objects", content_type = "text/event-stream", body = JobView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn job_events(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
+    let id = load(&state, &id).await?.id;
+    let follow = Follow {
+        rx: state.events.subscribe(),
+        shutdown: state.shutdown.clone(),
+        state,
+        id,
+        last: None,
+        done: false,
+    };
+    let stream = futures::stream::unfold(follow, |mut f| async move {
+        let event = f.next_event().await?;
+        Some((Ok(event), f))
+    });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}
+
+/// The state of one job event stream.
+struct Follow {
+    state: AppState,
+    id: String,
+    rx: tokio::sync::broadcast::Receiver<JobEvent>,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+    /// (state, progress in thousandths, attempts) last sent.
+    last: Option<(String, i64, i64)>,
+    done: bool,
+}
+
+impl Follow {
+    /// The next event to send, or `None` to end the stream. The database is the source of truth; the
+    /// broadcast only says when to look again (and a periodic look covers missed broadcasts).
+    async fn next_event(&mut self) -> Option<Event> {
+        if self.done {
+            return None;
+        }
+        loop {
+            let row = match store::jobs::get(&self.state.db, &self.id).await {
+                Ok(Some(row)) => row,
+                Ok(None) => return None,
+                Err(e) => {
+                    tracing::warn!(error = %e, "job event stream: database read failed");
+                    return None;
+                }
+            };
+            let key = (
+                row.state.clone(),
+                (row.progress * 1000.0).round() as i64,
+                row.attempts,
+            );
+            if self.last.as_ref() != Some(&key) {
+                let kind = if self.last.as_ref().map(|l| &l.0) == Some(&key.0) {
+                    "progress"
+                } else {
+                    "state"
+                };
+                self.last = Some(key);
+                self.done = row.job_state().is_terminal();
+                let view = JobView::try_from(&row).ok()?;
+                return Some(
+                    Event::default()
+                        .event(kind)
+                        .data(serde_json::to_string(&view).ok()?),
+                );
+            }
+            if !self.wait().await {
+                return None;
+            }
+        }
+    }
+
+    /// Waits for a change to this job, a second to pass, or shutdown (false).
+    async fn wait(&mut self) -> bool {
+        let tick = tokio::time::sleep(Duration::from_secs(1));
+        tokio::pin!(tick);
+        loop {
+            tokio::select! {
+                r = self.rx.recv() => match r {
+                    Ok(ev) if ev.job_id == self.id => return true,
+                    Ok(_) => continue,
+                    Err(RecvError::Lagged(_)) => return true,
+                    Err(RecvError::Closed) => return false,
+                },
+                _ = &mut tick => return true,
+                _ = crate::service::state::stopped(&mut self.shutdown) => return false,
+            }
+        }
+    }
+}

@@ -1,0 +1,135 @@
+//! HTTP handlers, one module per resource, each with its own `router()`.
+
+pub mod audit;
+pub mod displays;
+pub mod documents;
+pub mod evaluation;
+pub mod frames;
+pub mod health;
+pub mod jobs;
+pub mod metrics;
+pub mod profiles;
+
+use std::path::Path;
+
+use axum::body::Body;
+use axum::http::{header, HeaderValue};
+use axum::response::Response;
+use axum::Router;
+use serde::Deserialize;
+use tokio_util::io::ReaderStream;
+use uuid::Uuid;
+
+use super::error::ApiError;
+use super::state::AppState;
+use super::store::{Cursor, DEFAULT_PAGE, MAX_PAGE};
+
+/// Every route of the service (without the documentation UI and middleware).
+pub fn router(max_document_bytes: usize) -> Router<AppState> {
+    Router::new()
+        .merge(health::router())
+        .merge(metrics::router())
+        .merge(profiles::router())
+        .merge(displays::router())
+        .merge(documents::router(max_document_bytes))
+        .merge(jobs::router())
+        .merge(evaluation::router())
+        .merge(frames::router())
+        .merge(audit::router())
+}
+
+/// `?limit=&cursor=` of a listing.
+#[derive(Debug, Default, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct PageQuery {
+    /// Items per page (1–200, default 50).
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    pub cursor: Option<String>,
+}
+
+impl PageQuery {
+    /// Validated page size and cursor.
+    pub fn parse(&self) -> Result<(u32, Option<Cursor>), ApiError> {
+        let limit = self.limit.unwrap_or(DEFAULT_PAGE);
+        if !(1..=MAX_PAGE).contains(&limit) {
+            return Err(ApiError::invalid(
+                "limit",
+                format!("limit must be within 1..={MAX_PAGE}, got {limit}"),
+            ));
+        }
+        let cursor =
+            match &self.cursor {
+                Some(c) => Some(Cursor::decode(c).ok_or_else(|| {
+                    ApiError::invalid("cursor", "not a cursor this service issued")
+                })?),
+                None => None,
+            };
+        Ok((limit, cursor))
+    }
+}
+
+/// The cursor of the next page, if `items` filled the page.
+pub fn next_cursor<T>(
+    items: &[T],
+    limit: u32,
+    key: impl Fn(&T) -> (i64, String),
+) -> Option<String> {
+    if items.len() < limit as usize {
+        return None;
+    }
+    items.last().map(|last| {
+        let (created_at, id) = key(last);
+        Cursor { created_at, id }.encode()
+    })
+}
+
+/// The stored (hyphenated) form of an id.
+pub fn id_text(id: &Uuid) -> String {
+    id.hyphenated().to_string()
+}
+
+/// Streams a file as the response body; a missing file is a 404 of `what`.
+pub async fn stream_file(
+    path: &Path,
+    content_type: &'static str,
+    download_name: Option<&str>,
+    what: &'static str,
+) -> Result<Response, ApiError> {
+    let file = match tokio::fs::File::open(path).await {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ApiError::NotFound(what)),
+        Err(e) => return Err(ApiError::Internal(e.into())),
+    };
+    let len = file
+        .metadata()
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))?
+        .len();
+    let mut response = Response::new(Body::from_stream(ReaderStream::with_capacity(
+        file,
+        64 * 1024,
+    )));
+    let headers = response.headers_mut();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    headers.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+    if let Some(name) = download_name {
+        if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{name}\"")) {
+            headers.insert(header::CONTENT_DISPOSITION, v);
+        }
+    }
+    Ok(response)
+}
+
+/// The content type of a bundle or view file, by extension.
+pub fn content_type_of(name: &str) -> &'static str {
+    if name.ends_with(".png") {
+        "image/png"
+    } else if name.ends_with(".json") {
+        "application/json"
+    } else if name.ends_with(".zip") {
+        "application/zip"
+    } else {
+        "application/octet-stream"
+    }
+}

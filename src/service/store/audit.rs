@@ -1,0 +1,55 @@
+//! The append-only audit log.
+
+use sqlx::SqlitePool;
+
+use super::{now_ms, Cursor};
+
+/// One audit entry.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct AuditRow {
+    /// Sequence number.
+    pub id: i64,
+    /// `operator` or `display:<id>`.
+    pub actor: String,
+    /// What was done, e.g. `profile.create`.
+    pub action: String,
+    /// To what, e.g. `profiles/<id>`.
+    pub resource: String,
+    /// When (Unix ms).
+    pub created_at: i64,
+}
+
+/// Appends an entry.
+pub async fn record(
+    pool: &SqlitePool,
+    actor: &str,
+    action: &str,
+    resource: &str,
+) -> Result<(), sqlx::Error> {
+    sqlx::query("INSERT INTO audit_log (actor, action, resource, created_at) VALUES (?, ?, ?, ?)")
+        .bind(actor)
+        .bind(action)
+        .bind(resource)
+        .bind(now_ms())
+        .execute(pool)
+        .await?;
+    Ok(())
+}
+
+/// Entries newest first, after `cursor` (whose `id` is the sequence number).
+pub async fn list(
+    pool: &SqlitePool,
+    limit: u32,
+    cursor: Option<&Cursor>,
+) -> Result<Vec<AuditRow>, sqlx::Error> {
+    let before = cursor
+        .and_then(|c| c.id.parse::<i64>().ok())
+        .unwrap_or(i64::MAX);
+    sqlx::query_as::<_, AuditRow>(
+        "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < ? ORDER BY id DESC LIMIT ?",
+    )
+    .bind(before)
+    .bind(limit as i64)
+    .fetch_all(pool)
+    .await
+}

@@ -1,0 +1,146 @@
+//! Registered displays.
+
+use sqlx::SqlitePool;
+
+use super::{now_ms, Cursor};
+
+/// A display row.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct DisplayRow {
+    /// Id.
+    pub id: String,
+    /// Operator's name for it.
+    pub name: String,
+    /// `DisplayGeometry` JSON.
+    pub geometry: String,
+    /// SHA-256 of its access token.
+    pub token_hash: Vec<u8>,
+    /// When the current token was issued.
+    pub token_rotated_at: i64,
+    /// Set when deleted.
+    pub deleted_at: Option<i64>,
+    /// Registration time.
+    pub created_at: i64,
+}
+
+const COLUMNS: &str = "id, name, geometry, token_hash, token_rotated_at, deleted_at, created_at";
+
+/// Registers a display.
+pub async fn insert(
+    pool: &SqlitePool,
+    id: &str,
+    name: &str,
+    geometry_json: &str,
+    token_hash: &[u8],
+) -> Result<DisplayRow, sqlx::Error> {
+    let now = now_ms();
+    sqlx::query_as::<_, DisplayRow>(&format!(
+        "INSERT INTO displays (id, name, geometry, token_hash, token_rotated_at, created_at)
+         VALUES (?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+    ))
+    .bind(id)
+    .bind(name)
+    .bind(geometry_json)
+    .bind(token_hash)
+    .bind(now)
+    .bind(now)
+    .fetch_one(pool)
+    .await
+}
+
+/// A live display.
+pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DisplayRow>, sqlx::Error> {
+    sqlx::query_as::<_, DisplayRow>(&format!(
+        "SELECT {COLUMNS} FROM displays WHERE id = ? AND deleted_at IS NULL"
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// The live display whose token has this hash (the hash column is unique and indexed).
+pub async fn by_token_hash(
+    pool: &SqlitePool,
+    hash: &[u8],
+) -> Result<Option<DisplayRow>, sqlx::Error> {
+    sqlx::query_as::<_, DisplayRow>(&format!(
+        "SELECT {COLUMNS} FROM displays WHERE token_hash = ? AND deleted_at IS NULL"
+    ))
+    .bind(hash)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Live displays, newest first.
+pub async fn list(
+    pool: &SqlitePool,
+    limit: u32,
+    cursor: Option<&Cursor>,
+) -> Result<Vec<DisplayRow>, sqlx::Error> {
+    let (at, id) = cursor
+        .map(|c| (c.created_at, c.id.as_str()))
+        .unwrap_or((i64::MAX, ""));
+    sqlx::query_as::<_, DisplayRow>(&format!(
+        "SELECT {COLUMNS} FROM displays
+         WHERE deleted_at IS NULL AND (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
+         ORDER BY created_at DESC, id DESC LIMIT ?"
+    ))
+    .bind(at)
+    .bind(at)
+    .bind(id)
+    .bind(id)
+    .bind(limit as i64)
+    .fetch_all(pool)
+    .await
+}
+
+/// Replaces the token hash; the old token stops working at once.
+pub async fn rotate_token(
+    pool: &SqlitePool,
+    id: &str,
+    token_hash: &[u8],
+) -> Result<Option<DisplayRow>, sqlx::Error> {
+    sqlx::query_as::<_, DisplayRow>(&format!(
+        "UPDATE displays SET token_hash = ?, token_rotated_at = ? WHERE id = ? AND deleted_at IS NULL
+         RETURNING {COLUMNS}"
+    ))
+    .bind(token_hash)
+    .bind(now_ms())
+    .bind(id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Soft-deletes a display (its token stops working; its jobs keep their history) and cancels its
+/// queued jobs, asking running ones to stop. Returns false if there was no such live display.
+pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
+    let now = now_ms();
+    let mut tx = pool.begin().await?;
+    let done =
+        sqlx::query("UPDATE displays SET deleted_at = ? WHERE id = ? AND deleted_at IS NULL")
+            .bind(now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected()
+            == 1;
+    if done {
+        sqlx::query(
+            "UPDATE jobs SET state = 'cancelled', last_error = 'the display was deleted', finished_at = ?,
+                 updated_at = ?
+             WHERE display_id = ? AND state = 'queued'",
+        )
+        .bind(now)
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE display_id = ? AND state = 'running'")
+            .bind(now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+    }
+    tx.commit().await?;
+    Ok(done)
+}

@@ -1,0 +1,456 @@
+//! The durable job queue and job records.
+//!
+//! A job is claimed atomically by one `UPDATE … RETURNING` that sets a lease; the owning worker renews
+//! the lease with a heartbeat. Every write a worker makes after claiming is guarded by
+//! `attempts = <its attempt>` and `state = 'running'`, so a worker that lost its lease (and whose job was
+//! claimed again) can never overwrite the newer attempt's outcome: each job completes exactly once.
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use sqlx::SqlitePool;
+
+use super::{now_ms, Cursor};
+
+/// Where a job is in its life.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum JobState {
+    /// Waiting for a worker.
+    Queued,
+    /// A worker holds its lease.
+    Running,
+    /// Its bundle is available.
+    Succeeded,
+    /// It ended with an error (see `last_error`).
+    Failed,
+    /// It was cancelled.
+    Cancelled,
+}
+
+impl JobState {
+    /// Every state, in life order.
+    pub const ALL: [JobState; 5] = [
+        Self::Queued,
+        Self::Running,
+        Self::Succeeded,
+        Self::Failed,
+        Self::Cancelled,
+    ];
+
+    /// The database and wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Queued => "queued",
+            Self::Running => "running",
+            Self::Succeeded => "succeeded",
+            Self::Failed => "failed",
+            Self::Cancelled => "cancelled",
+        }
+    }
+
+    /// Parses the database name.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|st| st.as_str() == s)
+    }
+
+    /// True for succeeded, failed and cancelled.
+    pub fn is_terminal(self) -> bool {
+        matches!(self, Self::Succeeded | Self::Failed | Self::Cancelled)
+    }
+}
+
+/// A job row, as stored.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct JobRow {
+    /// Id.
+    pub id: String,
+    /// Display it is for.
+    pub display_id: String,
+    /// Document shown.
+    pub document_id: String,
+    /// Decoy image, if any.
+    pub decoy_document_id: Option<String>,
+    /// Target profile.
+    pub profile_id: String,
+    /// Version of the target profile the job uses.
+    pub profile_version: i64,
+    /// JSON `[{"profile_id", "version"}]` of observer profiles.
+    pub observers: String,
+    /// Encoder method name.
+    pub method: String,
+    /// `EncodeOptions` JSON.
+    pub options: String,
+    /// State name.
+    pub state: String,
+    /// Progress 0..=1.
+    pub progress: f64,
+    /// Claims so far.
+    pub attempts: i64,
+    /// Claims allowed.
+    pub max_attempts: i64,
+    /// Lease expiry (Unix ms) while running.
+    pub lease_until: Option<i64>,
+    /// Last heartbeat (Unix ms).
+    pub heartbeat_at: Option<i64>,
+    /// Worker holding the lease.
+    pub worker_id: Option<String>,
+    /// Last error message.
+    pub last_error: Option<String>,
+    /// Cancel was asked for.
+    pub cancel_requested: bool,
+    /// Client's idempotency key.
+    pub idempotency_key: Option<String>,
+    /// SHA-256 of the canonical request, for idempotency checks.
+    pub request_hash: String,
+    /// Evaluation summary JSON.
+    pub evaluation_summary: Option<String>,
+    /// Output directory relative to the data directory.
+    pub bundle_path: Option<String>,
+    /// JSON list of the bundle files a display may fetch.
+    pub bundle_files: Option<String>,
+    /// Creation time.
+    pub created_at: i64,
+    /// First claim.
+    pub started_at: Option<i64>,
+    /// End time.
+    pub finished_at: Option<i64>,
+    /// Wall time of the successful solve, ms.
+    pub solve_ms: Option<i64>,
+    /// Last change.
+    pub updated_at: i64,
+}
+
+impl JobRow {
+    /// The parsed state.
+    pub fn job_state(&self) -> JobState {
+        JobState::parse(&self.state).unwrap_or(JobState::Failed)
+    }
+}
+
+const COLUMNS: &str = "id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers, \
+     method, options, state, progress, attempts, max_attempts, lease_until, heartbeat_at, worker_id, last_error, \
+     cancel_requested, idempotency_key, request_hash, evaluation_summary, bundle_path, bundle_files, created_at, \
+     started_at, finished_at, solve_ms, updated_at";
+
+/// A job to enqueue.
+#[derive(Clone, Debug)]
+pub struct NewJob {
+    /// Id.
+    pub id: String,
+    /// Display.
+    pub display_id: String,
+    /// Document.
+    pub document_id: String,
+    /// Decoy document.
+    pub decoy_document_id: Option<String>,
+    /// Target profile.
+    pub profile_id: String,
+    /// Its version.
+    pub profile_version: i64,
+    /// Observers JSON.
+    pub observers: String,
+    /// Method name.
+    pub method: String,
+    /// Options JSON.
+    pub options: String,
+    /// Attempts allowed.
+    pub max_attempts: i64,
+    /// Idempotency key.
+    pub idempotency_key: Option<String>,
+    /// Canonical request hash.
+    pub request_hash: String,
+}
+
+/// What enqueueing did.
+#[derive(Debug)]
+pub enum Enqueued {
+    /// A new job.
+    Created(JobRow),
+    /// The same key with the same request: the job created the first time.
+    Existing(JobRow),
+    /// The same key with a different request.
+    KeyReused(JobRow),
+}
+
+/// Enqueues a job, honouring its idempotency key.
+pub async fn enqueue(pool: &SqlitePool, job: &NewJob) -> Result<Enqueued, sqlx::Error> {
+    let now = now_ms();
+    // ON CONFLICT DO NOTHING on the unique key makes concurrent identical requests race safely: one
+    // inserts, the others see no row returned and read the winner.
+    let inserted = sqlx::query_as::<_, JobRow>(&format!(
+        "INSERT INTO jobs (id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers,
+             method, options, state, max_attempts, idempotency_key, request_hash, created_at, updated_at)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?, ?)
+         ON CONFLICT (idempotency_key) DO NOTHING
+         RETURNING {COLUMNS}"
+    ))
+    .bind(&job.id)
+    .bind(&job.display_id)
+    .bind(&job.document_id)
+    .bind(&job.decoy_document_id)
+    .bind(&job.profile_id)
+    .bind(job.profile_version)
+    .bind(&job.observers)
+    .bind(&job.method)
+    .bind(&job.options)
+    .bind(job.max_attempts)
+    .bind(&job.idempotency_key)
+    .bind(&job.request_hash)
+    .bind(now)
+    .bind(now)
+    .fetch_optional(pool)
+    .await?;
+    if let Some(row) = inserted {
+        return Ok(Enqueued::Created(row));
+    }
+    let existing = sqlx::query_as::<_, JobRow>(&format!(
+        "SELECT {COLUMNS} FROM jobs WHERE idempotency_key = ?"
+    ))
+    .bind(&job.idempotency_key)
+    .fetch_one(pool)
+    .await?;
+    if existing.request_hash == job.request_hash {
+        Ok(Enqueued::Existing(existing))
+    } else {
+        Ok(Enqueued::KeyReused(existing))
+    }
+}
+
+/// One job.
+pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// Filters of a job listing.
+#[derive(Clone, Debug, Default)]
+pub struct JobFilter {
+    /// Only jobs in this state.
+    pub state: Option<JobState>,
+    /// Only jobs for this display.
+    pub display_id: Option<String>,
+}
+
+/// Jobs newest first.
+pub async fn list(
+    pool: &SqlitePool,
+    filter: &JobFilter,
+    limit: u32,
+    cursor: Option<&Cursor>,
+) -> Result<Vec<JobRow>, sqlx::Error> {
+    let (at, id) = cursor
+        .map(|c| (c.created_at, c.id.as_str()))
+        .unwrap_or((i64::MAX, ""));
+    sqlx::query_as::<_, JobRow>(&format!(
+        "SELECT {COLUMNS} FROM jobs
+         WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR display_id = ?2)
+           AND (created_at < ?3 OR (created_at = ?3 AND id < ?4) OR ?4 = '')
+         ORDER BY created_at DESC, id DESC LIMIT ?5"
+    ))
+    .bind(filter.state.map(JobState::as_str))
+    .bind(filter.display_id.as_deref())
+    .bind(at)
+    .bind(id)
+    .bind(limit as i64)
+    .fetch_all(pool)
+    .await
+}
+
+/// Asks a job to stop: a queued job is cancelled at once, a running one gets `cancel_requested` (its
+/// worker stops between solver iterations). Returns the job after the change.
+pub async fn request_cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    let now = now_ms();
+    sqlx::query_as::<_, JobRow>(&format!(
+        "UPDATE jobs SET
+             cancel_requested = CASE WHEN state IN ('queued', 'running') THEN 1 ELSE cancel_requested END,
+             state = CASE WHEN state = 'queued' THEN 'cancelled' ELSE state END,
+             finished_at = CASE WHEN state = 'queued' THEN ?1 ELSE finished_at END,
+             updated_at = ?1
+         WHERE id = ?2 RETURNING {COLUMNS}"
+    ))
+    .bind(now)
+    .bind(id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Ends running jobs whose lease expired with no attempts left (`failed`, or `cancelled` if a cancel
+/// was asked for), and returns them.
+pub async fn fail_exhausted(pool: &SqlitePool, now: i64) -> Result<Vec<JobRow>, sqlx::Error> {
+    sqlx::query_as::<_, JobRow>(&format!(
+        "UPDATE jobs SET
+             state = CASE WHEN cancel_requested = 1 THEN 'cancelled' ELSE 'failed' END,
+             last_error = CASE WHEN cancel_requested = 1 THEN last_error
+                 ELSE 'the worker stopped responding (lease expired) on attempt ' || attempts || ' of ' ||
+                      max_attempts || COALESCE('; earlier error: ' || last_error, '') END,
+             lease_until = NULL, finished_at = ?1, updated_at = ?1
+         WHERE state = 'running' AND lease_until < ?1 AND (attempts >= max_attempts OR cancel_requested = 1)
+         RETURNING {COLUMNS}"
+    ))
+    .bind(now)
+    .fetch_all(pool)
+    .await
+}
+
+/// Atomically claims the oldest claimable job: a queued one, or a running one whose lease expired
+/// (its worker died) with attempts left. Sets the lease and counts the attempt.
+pub async fn claim_next(
+    pool: &SqlitePool,
+    worker_id: &str,
+    lease: Duration,
+    now: i64,
+) -> Result<Option<JobRow>, sqlx::Error> {
+    let lease_until = now + lease.as_millis() as i64;
+    // One statement, so SQLite's write lock makes the select-and-update atomic: two workers can never
+    // claim the same job.
+    sqlx::query_as::<_, JobRow>(&format!(
+        "UPDATE jobs SET state = 'running', attempts = attempts + 1, lease_until = ?1, heartbeat_at = ?2,
+             worker_id = ?3, started_at = COALESCE(started_at, ?2), updated_at = ?2
+         WHERE id = (
+             SELECT id FROM jobs
+             WHERE (state = 'queued' OR (state = 'running' AND lease_until < ?2))
+               AND attempts < max_attempts
+             ORDER BY created_at, id LIMIT 1)
+         RETURNING {COLUMNS}"
+    ))
+    .bind(lease_until)
+    .bind(now)
+    .bind(worker_id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Renews the lease of the caller's attempt and records progress. Returns `None` if the caller no
+/// longer owns the job, else whether a cancel was asked for.
+pub async fn heartbeat(
+    pool: &SqlitePool,
+    id: &str,
+    attempt: i64,
+    lease: Duration,
+    progress: f64,
+) -> Result<Option<bool>, sqlx::Error> {
+    let now = now_ms();
+    let row: Option<(bool,)> = sqlx::query_as(
+        "UPDATE jobs SET lease_until = ?1, heartbeat_at = ?2, progress = MAX(progress, ?3), updated_at = ?2
+         WHERE id = ?4 AND attempts = ?5 AND state = 'running'
+         RETURNING cancel_requested",
+    )
+    .bind(now + lease.as_millis() as i64)
+    .bind(now)
+    .bind(progress.clamp(0.0, 1.0))
+    .bind(id)
+    .bind(attempt)
+    .fetch_optional(pool)
+    .await?;
+    Ok(row.map(|(c,)| c))
+}
+
+/// What a finished bundle looks like in the row.
+#[derive(Clone, Debug)]
+pub struct Success {
+    /// Evaluation summary JSON.
+    pub evaluation_summary: Option<String>,
+    /// Output directory, relative to the data directory.
+    pub bundle_path: String,
+    /// Bundle files JSON.
+    pub bundle_files: String,
+    /// Solve wall time.
+    pub solve_ms: i64,
+}
+
+/// Marks the caller's attempt succeeded. False if it no longer owned the job.
+pub async fn mark_succeeded(
+    pool: &SqlitePool,
+    id: &str,
+    attempt: i64,
+    s: &Success,
+) -> Result<bool, sqlx::Error> {
+    let now = now_ms();
+    let r = sqlx::query(
+        "UPDATE jobs SET state = 'succeeded', progress = 1, evaluation_summary = ?1, bundle_path = ?2,
+             bundle_files = ?3, solve_ms = ?4, lease_until = NULL, finished_at = ?5, updated_at = ?5
+         WHERE id = ?6 AND attempts = ?7 AND state = 'running'",
+    )
+    .bind(&s.evaluation_summary)
+    .bind(&s.bundle_path)
+    .bind(&s.bundle_files)
+    .bind(s.solve_ms)
+    .bind(now)
+    .bind(id)
+    .bind(attempt)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Ends the caller's attempt in `failed` or `cancelled`. False if it no longer owned the job.
+pub async fn mark_ended(
+    pool: &SqlitePool,
+    id: &str,
+    attempt: i64,
+    state: JobState,
+    error: Option<&str>,
+) -> Result<bool, sqlx::Error> {
+    debug_assert!(matches!(state, JobState::Failed | JobState::Cancelled));
+    let now = now_ms();
+    let r = sqlx::query(
+        "UPDATE jobs SET state = ?1, last_error = COALESCE(?2, last_error), lease_until = NULL,
+             finished_at = ?3, updated_at = ?3
+         WHERE id = ?4 AND attempts = ?5 AND state = 'running'",
+    )
+    .bind(state.as_str())
+    .bind(error)
+    .bind(now)
+    .bind(id)
+    .bind(attempt)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Puts the caller's attempt back in the queue. With `refund` the attempt is not counted (the server
+/// is shutting down; the job did nothing wrong). False if it no longer owned the job.
+pub async fn requeue(
+    pool: &SqlitePool,
+    id: &str,
+    attempt: i64,
+    error: Option<&str>,
+    refund: bool,
+) -> Result<bool, sqlx::Error> {
+    let now = now_ms();
+    let r = sqlx::query(
+        "UPDATE jobs SET state = 'queued', attempts = attempts - ?1, last_error = COALESCE(?2, last_error),
+             lease_until = NULL, worker_id = NULL, progress = 0, updated_at = ?3
+         WHERE id = ?4 AND attempts = ?5 AND state = 'running'",
+    )
+    .bind(i64::from(refund))
+    .bind(error)
+    .bind(now)
+    .bind(id)
+    .bind(attempt)
+    .execute(pool)
+    .await?;
+    Ok(r.rows_affected() == 1)
+}
+
+/// Number of jobs in each state.
+pub async fn count_by_state(pool: &SqlitePool) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
+    let rows: Vec<(String, i64)> =
+        sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+            .fetch_all(pool)
+            .await?;
+    Ok(JobState::ALL
+        .into_iter()
+        .map(|s| {
+            (
+                s,
+                rows.iter()
+                    .find(|(n, _)| n == s.as_str())
+                    .map_or(0, |(_, c)| *c),
+            )
+        })
+        .collect())
+}

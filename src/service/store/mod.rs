@@ -1,0 +1,151 @@
+//! SQLite persistence: connection set-up, migrations and the queries of each resource.
+//!
+//! Queries are runtime-checked (`sqlx::query_as`) so no database is needed at build time.
+
+pub mod audit;
+pub mod displays;
+pub mod documents;
+pub mod jobs;
+pub mod profiles;
+
+use std::path::Path;
+use std::str::FromStr as _;
+use std::time::Duration;
+
+use base64::Engine as _;
+use chrono::{DateTime, TimeZone as _, Utc};
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::SqlitePool;
+
+/// The migrations in `migrations/`, embedded in the binary.
+pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!();
+
+/// Opens (creating if needed) the database at `path`: WAL journal, a busy timeout so concurrent writers
+/// wait rather than fail, foreign keys on, and `secure_delete` so deleted ciphertexts are overwritten.
+pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+    let options = SqliteConnectOptions::from_str("sqlite:")?
+        .filename(path)
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Normal)
+        .busy_timeout(Duration::from_secs(10))
+        .foreign_keys(true)
+        .pragma("secure_delete", "on");
+    SqlitePoolOptions::new()
+        .max_connections(8)
+        .acquire_timeout(Duration::from_secs(10))
+        .connect_with(options)
+        .await
+}
+
+/// Applies the embedded migrations.
+pub async fn migrate(pool: &SqlitePool) -> Result<(), sqlx::migrate::MigrateError> {
+    MIGRATOR.run(pool).await
+}
+
+/// True when every embedded migration has been applied successfully.
+pub async fn migrations_applied(pool: &SqlitePool) -> Result<bool, sqlx::Error> {
+    let applied: Vec<(i64,)> =
+        sqlx::query_as("SELECT version FROM _sqlx_migrations WHERE success = 1")
+            .fetch_all(pool)
+            .await?;
+    Ok(MIGRATOR
+        .iter()
+        .all(|m| applied.iter().any(|(v,)| *v == m.version)))
+}
+
+/// Now, in the database's time unit (Unix milliseconds).
+pub fn now_ms() -> i64 {
+    Utc::now().timestamp_millis()
+}
+
+/// Unix milliseconds to a UTC time.
+pub fn to_time(ms: i64) -> DateTime<Utc> {
+    Utc.timestamp_millis_opt(ms).single().unwrap_or_default()
+}
+
+/// A position in a listing ordered by (created_at, id) descending: the last item of the previous page.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Cursor {
+    /// `created_at` of the last item returned.
+    pub created_at: i64,
+    /// `id` of the last item returned.
+    pub id: String,
+}
+
+impl Cursor {
+    /// Opaque text form handed to clients.
+    pub fn encode(&self) -> String {
+        base64::engine::general_purpose::URL_SAFE_NO_PAD
+            .encode(format!("{}|{}", self.created_at, self.id))
+    }
+
+    /// Parses the text form; `None` when it is not one this service handed out.
+    pub fn decode(text: &str) -> Option<Self> {
+        let raw = base64::engine::general_purpose::URL_SAFE_NO_PAD
+            .decode(text)
+            .ok()?;
+        let raw = String::from_utf8(raw).ok()?;
+        let (at, id) = raw.split_once('|')?;
+        Some(Self {
+            created_at: at.parse().ok()?,
+            id: id.to_string(),
+        })
+    }
+}
+
+/// Page size bounds for listings.
+pub const DEFAULT_PAGE: u32 = 50;
+/// Largest page a client may ask for.
+pub const MAX_PAGE: u32 = 200;
+
+/// The store of a sealed value that proves the master key has not changed since the data was written.
+pub async fn check_master_key(
+    pool: &SqlitePool,
+    key: &super::crypto::MasterKey,
+) -> anyhow::Result<()> {
+    const NAME: &str = "master_key_check";
+    const PLAIN: &[u8] = b"eyekey master key check";
+    let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT value FROM settings WHERE name = ?")
+        .bind(NAME)
+        .fetch_optional(pool)
+        .await?;
+    match row {
+        Some((value,)) => {
+            let (nonce, ct) = value.split_at(super::crypto::NONCE_LEN.min(value.len()));
+            match key.open(nonce, ct, NAME.as_bytes()) {
+                Ok(p) if p == PLAIN => Ok(()),
+                _ => anyhow::bail!(
+                    "the master key does not match the one this data directory's profiles were sealed with"
+                ),
+            }
+        }
+        None => {
+            let sealed = key.seal(PLAIN, NAME.as_bytes())?;
+            let mut value = sealed.nonce;
+            value.extend_from_slice(&sealed.ciphertext);
+            sqlx::query("INSERT INTO settings (name, value, created_at) VALUES (?, ?, ?)")
+                .bind(NAME)
+                .bind(value)
+                .bind(now_ms())
+                .execute(pool)
+                .await?;
+            Ok(())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cursor_round_trips_and_rejects_garbage() {
+        let c = Cursor {
+            created_at: 1_700_000_000_123,
+            id: "3f1c".into(),
+        };
+        assert_eq!(Cursor::decode(&c.encode()), Some(c));
+        assert_eq!(Cursor::decode("not a cursor"), None);
+    }
+}

@@ -1,0 +1,212 @@
+//! Vision profiles: metadata rows and sealed versions.
+
+use sqlx::SqlitePool;
+
+use super::{now_ms, Cursor};
+use crate::service::crypto::{profile_aad, MasterKey};
+
+/// Metadata of a profile (never its contents).
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct ProfileRow {
+    /// Id.
+    pub id: String,
+    /// Operator's label.
+    pub label: Option<String>,
+    /// Latest version.
+    pub current_version: i64,
+    /// Set when deleted.
+    pub deleted_at: Option<i64>,
+    /// First enrolment.
+    pub created_at: i64,
+    /// Latest enrolment.
+    pub updated_at: i64,
+}
+
+/// A sealed version.
+#[derive(Clone, Debug, sqlx::FromRow)]
+pub struct ProfileVersionRow {
+    /// Profile id.
+    pub profile_id: String,
+    /// Version (1, 2, ...).
+    pub version: i64,
+    /// AEAD nonce.
+    pub nonce: Vec<u8>,
+    /// AEAD ciphertext.
+    pub ciphertext: Vec<u8>,
+    /// When enrolled.
+    pub created_at: i64,
+}
+
+impl ProfileVersionRow {
+    /// Opens the sealed profile JSON.
+    pub fn open(&self, key: &MasterKey) -> anyhow::Result<Vec<u8>> {
+        Ok(key.open(
+            &self.nonce,
+            &self.ciphertext,
+            &profile_aad(&self.profile_id, self.version),
+        )?)
+    }
+}
+
+const COLUMNS: &str = "id, label, current_version, deleted_at, created_at, updated_at";
+
+/// Enrols a new profile as version 1.
+pub async fn insert(
+    pool: &SqlitePool,
+    key: &MasterKey,
+    id: &str,
+    label: Option<&str>,
+    profile_json: &[u8],
+) -> anyhow::Result<ProfileRow> {
+    let now = now_ms();
+    let sealed = key.seal(profile_json, &profile_aad(id, 1))?;
+    let mut tx = pool.begin().await?;
+    let row = sqlx::query_as::<_, ProfileRow>(&format!(
+        "INSERT INTO profiles (id, label, current_version, created_at, updated_at) VALUES (?, ?, 1, ?, ?)
+         RETURNING {COLUMNS}"
+    ))
+    .bind(id)
+    .bind(label)
+    .bind(now)
+    .bind(now)
+    .fetch_one(&mut *tx)
+    .await?;
+    sqlx::query("INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, 1, ?, ?, ?)")
+        .bind(id)
+        .bind(sealed.nonce)
+        .bind(sealed.ciphertext)
+        .bind(now)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(row)
+}
+
+/// Re-enrols: adds version `current_version + 1` and makes it current. `None` if no such live profile.
+pub async fn add_version(
+    pool: &SqlitePool,
+    key: &MasterKey,
+    id: &str,
+    label: Option<&str>,
+    profile_json: &[u8],
+) -> anyhow::Result<Option<ProfileRow>> {
+    let now = now_ms();
+    // The transaction's first statement writes, so it takes SQLite's write lock at once: concurrent
+    // re-enrolments serialise and get distinct versions (no read-then-upgrade deadlock).
+    let mut tx = pool.begin().await?;
+    let row = sqlx::query_as::<_, ProfileRow>(&format!(
+        "UPDATE profiles SET current_version = current_version + 1, updated_at = ?, label = COALESCE(?, label)
+         WHERE id = ? AND deleted_at IS NULL RETURNING {COLUMNS}"
+    ))
+    .bind(now)
+    .bind(label)
+    .bind(id)
+    .fetch_optional(&mut *tx)
+    .await?;
+    let Some(row) = row else {
+        return Ok(None);
+    };
+    let sealed = key.seal(profile_json, &profile_aad(id, row.current_version))?;
+    sqlx::query("INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, ?, ?, ?, ?)")
+        .bind(id)
+        .bind(row.current_version)
+        .bind(sealed.nonce)
+        .bind(sealed.ciphertext)
+        .bind(now)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(Some(row))
+}
+
+/// A live (not deleted) profile's metadata.
+pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<ProfileRow>, sqlx::Error> {
+    sqlx::query_as::<_, ProfileRow>(&format!(
+        "SELECT {COLUMNS} FROM profiles WHERE id = ? AND deleted_at IS NULL"
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// One sealed version of a live profile.
+pub async fn get_version(
+    pool: &SqlitePool,
+    id: &str,
+    version: i64,
+) -> Result<Option<ProfileVersionRow>, sqlx::Error> {
+    sqlx::query_as::<_, ProfileVersionRow>(
+        "SELECT v.profile_id, v.version, v.nonce, v.ciphertext, v.created_at
+         FROM profile_versions v JOIN profiles p ON p.id = v.profile_id
+         WHERE v.profile_id = ? AND v.version = ? AND p.deleted_at IS NULL",
+    )
+    .bind(id)
+    .bind(version)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Live profiles, newest first.
+pub async fn list(
+    pool: &SqlitePool,
+    limit: u32,
+    cursor: Option<&Cursor>,
+) -> Result<Vec<ProfileRow>, sqlx::Error> {
+    let (at, id) = cursor
+        .map(|c| (c.created_at, c.id.as_str()))
+        .unwrap_or((i64::MAX, ""));
+    // Keyset pagination on (created_at, id): stable under concurrent inserts, unlike OFFSET.
+    sqlx::query_as::<_, ProfileRow>(&format!(
+        "SELECT {COLUMNS} FROM profiles
+         WHERE deleted_at IS NULL AND (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
+         ORDER BY created_at DESC, id DESC LIMIT ?"
+    ))
+    .bind(at)
+    .bind(at)
+    .bind(id)
+    .bind(id)
+    .bind(limit as i64)
+    .fetch_all(pool)
+    .await
+}
+
+/// Deletes a profile: its sealed versions are removed (the keys are gone), the metadata row stays as a
+/// tombstone, and queued jobs that target it are cancelled (running ones are asked to stop).
+/// Returns false if there was no such live profile.
+pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
+    let now = now_ms();
+    let mut tx = pool.begin().await?;
+    let done = sqlx::query(
+        "UPDATE profiles SET deleted_at = ?, updated_at = ? WHERE id = ? AND deleted_at IS NULL",
+    )
+    .bind(now)
+    .bind(now)
+    .bind(id)
+    .execute(&mut *tx)
+    .await?
+    .rows_affected()
+        == 1;
+    if done {
+        sqlx::query("DELETE FROM profile_versions WHERE profile_id = ?")
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+        sqlx::query(
+            "UPDATE jobs SET state = 'cancelled', last_error = 'the target profile was deleted',
+                 finished_at = ?, updated_at = ?
+             WHERE profile_id = ? AND state = 'queued'",
+        )
+        .bind(now)
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE profile_id = ? AND state = 'running'")
+            .bind(now)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+    }
+    tx.commit().await?;
+    Ok(done)
+}

@@ -1,0 +1,155 @@
+use reqwest::StatusCode;
+
+use crate::helpers::{
+    document_png, expect_error, expect_json, png_claiming, spawn_app, spawn_app_with, TestApp,
+    OPERATOR_TOKEN,
+};
+
+async fn upload(app: &TestApp, content_type: &str, body: Vec<u8>) -> reqwest::Response {
+    app.client
+        .post(app.url("/v1/documents"))
+        .bearer_auth(OPERATOR_TOKEN)
+        .header("content-type", content_type)
+        .body(body)
+        .send()
+        .await
+        .unwrap()
+}
+
+#[tokio::test]
+async fn a_png_or_jpeg_document_is_stored_with_its_size_and_checksum() {
+    let app = spawn_app().await;
+    let png = document_png(30, 20);
+    let doc = expect_json(
+        upload(&app, "image/png", png.clone()).await,
+        StatusCode::CREATED,
+    )
+    .await;
+    assert_eq!(
+        (doc["width"].as_i64(), doc["height"].as_i64()),
+        (Some(30), Some(20))
+    );
+    assert_eq!(doc["content_type"], "image/png");
+    use sha2::Digest as _;
+    assert_eq!(doc["sha256"], hex::encode(sha2::Sha256::digest(&png)));
+    let got = expect_json(
+        app.op_get(&format!("/v1/documents/{}", doc["id"].as_str().unwrap()))
+            .await,
+        StatusCode::OK,
+    )
+    .await;
+    assert_eq!(got, doc);
+
+    let mut jpeg = Vec::new();
+    image::RgbImage::from_pixel(16, 8, image::Rgb([90, 90, 90]))
+        .write_to(
+            &mut std::io::Cursor::new(&mut jpeg),
+            image::ImageFormat::Jpeg,
+        )
+        .unwrap();
+    let doc = expect_json(upload(&app, "image/jpeg", jpeg).await, StatusCode::CREATED).await;
+    assert_eq!(doc["content_type"], "image/jpeg");
+}
+
+#[tokio::test]
+async fn a_truncated_png_is_refused_as_truncated() {
+    let app = spawn_app().await;
+    let png = document_png(64, 64);
+    let cut = png[..png.len() / 2].to_vec();
+    let e = expect_error(
+        upload(&app, "image/png", cut).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("truncated"), "{e}");
+    let e = expect_error(
+        upload(&app, "image/png", png[..20].to_vec()).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("header"), "{e}");
+}
+
+#[tokio::test]
+async fn text_and_mislabelled_bodies_are_refused() {
+    let app = spawn_app().await;
+    let e = expect_error(
+        upload(&app, "text/plain", b"hello".to_vec()).await,
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("image/png"), "{e}");
+    let e = expect_error(
+        upload(&app, "image/jpeg", document_png(8, 8)).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("not a JPEG"), "{e}");
+    let e = expect_error(
+        upload(&app, "image/png", b"plain text, not a picture".to_vec()).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("not a PNG"), "{e}");
+    expect_error(
+        upload(&app, "image/png", Vec::new()).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+}
+
+#[tokio::test]
+async fn a_png_claiming_ten_gigapixels_is_refused_before_decoding() {
+    let app = spawn_app().await;
+    let bomb = png_claiming(100_000, 100_000);
+    assert!(bomb.len() < 100);
+    let e = expect_error(
+        upload(&app, "image/png", bomb).await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too_large",
+    )
+    .await;
+    assert_eq!(e["field"], "pixels");
+    let message = e["message"].as_str().unwrap();
+    assert!(
+        message.contains("100000×100000") && message.contains("limit"),
+        "{message}"
+    );
+}
+
+#[tokio::test]
+async fn a_png_that_lies_about_its_data_is_refused() {
+    let app = spawn_app().await;
+    // Within the pixel limit, but its data does not decode to what the header promises.
+    let e = expect_error(
+        upload(&app, "image/png", png_claiming(1000, 1000)).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("could not be decoded"),
+        "{e}"
+    );
+}
+
+#[tokio::test]
+async fn a_body_over_the_byte_limit_is_refused() {
+    let app = spawn_app_with(|c| c.limits.max_document_bytes = 1000).await;
+    let e = expect_error(
+        upload(&app, "image/png", vec![0u8; 5000]).await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too_large",
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("1000 bytes"), "{e}");
+}

@@ -1,0 +1,192 @@
+//! End to end with the real encoder.
+
+use std::io::Read as _;
+use std::time::Duration;
+
+use reqwest::StatusCode;
+use serde_json::json;
+use sha2::{Digest as _, Sha256};
+
+use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, OPERATOR_TOKEN};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
+    let app = spawn_app_with(|c| c.workers = 1).await;
+    let f = app.fixtures().await;
+    let observer = app
+        .enrol(&eyekey::optics::profile::VisionProfile::perfect())
+        .await;
+    let mut body = job_body(&f);
+    body["observer_profile_ids"] = json!([observer]);
+    let job = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+    let id = job["id"].as_str().unwrap().to_string();
+
+    // Follow it to the end over server-sent events, and wait for the display's notification too.
+    let display_events = app.display_get(&f.display_token, "/v1/frames/events").await;
+    let notified = tokio::spawn(read_events(
+        display_events,
+        Duration::from_secs(120),
+        |name, _| name == "job_succeeded",
+    ));
+    let stream = app
+        .client
+        .get(app.url(&format!("/v1/jobs/{id}/events")))
+        .bearer_auth(OPERATOR_TOKEN)
+        .send()
+        .await
+        .unwrap();
+    let events = read_events(stream, Duration::from_secs(120), |_, v| {
+        matches!(
+            v["state"].as_str(),
+            Some("succeeded" | "failed" | "cancelled")
+        )
+    })
+    .await;
+    let last = &events.last().expect("events arrive").1;
+    assert_eq!(last["state"], "succeeded", "{last}");
+    assert_eq!(last["progress"], 1.0);
+    assert!(last["timings"]["solve_seconds"].as_f64().unwrap() > 0.0);
+    let note = notified.await.unwrap();
+    assert_eq!(
+        note.last().map(|(_, v)| v["id"].as_str().unwrap()),
+        Some(id.as_str())
+    );
+
+    // The display downloads the bundle and checks every file against the listing and the manifest.
+    let listing = expect_json(
+        app.display_get(&f.display_token, &format!("/v1/frames/jobs/{id}"))
+            .await,
+        StatusCode::OK,
+    )
+    .await;
+    let files = listing["files"].as_array().unwrap();
+    let frames = files
+        .iter()
+        .filter(|f| f["name"].as_str().unwrap().starts_with("frame_"))
+        .count();
+    assert_eq!(
+        frames,
+        crate::helpers::tiny_display().n_bands(),
+        "one frame per projector"
+    );
+    let r = app
+        .display_get(
+            &f.display_token,
+            &format!("/v1/frames/jobs/{id}/bundle.zip"),
+        )
+        .await;
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()["content-type"], "application/zip");
+    let zip_bytes = r.bytes().await.unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(zip_bytes.to_vec())).unwrap();
+    assert_eq!(zip.len(), files.len());
+    let mut manifest_text = String::new();
+    for file in files {
+        let name = file["name"].as_str().unwrap();
+        let mut entry = zip.by_name(name).unwrap();
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        assert_eq!(
+            hex::encode(Sha256::digest(&bytes)),
+            file["sha256"].as_str().unwrap(),
+            "{name}"
+        );
+        let single = app
+            .display_get(
+                &f.display_token,
+                &format!("/v1/frames/jobs/{id}/files/{name}"),
+            )
+            .await;
+        assert_eq!(
+            single.bytes().await.unwrap().as_ref(),
+            bytes.as_slice(),
+            "{name} alone equals its zip entry"
+        );
+        if name == "manifest.json" {
+            manifest_text = String::from_utf8(bytes).unwrap();
+        }
+    }
+    for file in files.iter().filter(|f| f["name"] != "manifest.json") {
+        let sha = file["sha256"].as_str().unwrap();
+        assert!(
+            manifest_text.contains(sha),
+            "the manifest records {}'s checksum",
+            file["name"]
+        );
+    }
+    for name in ["frame_0.png"] {
+        let mut entry = zip.by_name(name).unwrap();
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        let frame = image::load_from_memory(&bytes).unwrap();
+        let (w, h) = crate::helpers::tiny_display().frame_size();
+        assert_eq!((frame.width(), frame.height()), (w, h));
+        assert!(
+            matches!(frame.color(), image::ColorType::L16),
+            "frames are 16-bit grey"
+        );
+    }
+
+    // The operator reads the evaluation and the simulated views.
+    let report = expect_json(
+        app.op_get(&format!("/v1/jobs/{id}/evaluation")).await,
+        StatusCode::OK,
+    )
+    .await;
+    assert!(report.is_object());
+    let views = expect_json(
+        app.op_get(&format!("/v1/jobs/{id}/views")).await,
+        StatusCode::OK,
+    )
+    .await;
+    let names = views["names"].as_array().unwrap();
+    assert!(!names.is_empty());
+    let r = app
+        .op_get(&format!(
+            "/v1/jobs/{id}/views/{}",
+            names[0].as_str().unwrap()
+        ))
+        .await;
+    assert_eq!(r.status(), StatusCode::OK);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fifty_jobs_submitted_at_once_all_finish() {
+    let app = spawn_app_with(|c| c.workers = 2).await;
+    let f = app.fixtures().await;
+    let body = job_body(&f);
+    let requests = (0..50).map(|_| {
+        app.client
+            .post(app.url("/v1/jobs"))
+            .bearer_auth(OPERATOR_TOKEN)
+            .json(&body)
+            .send()
+    });
+    let mut ids = Vec::new();
+    for r in futures::future::join_all(requests).await {
+        ids.push(
+            expect_json(r.unwrap(), StatusCode::CREATED).await["id"]
+                .as_str()
+                .unwrap()
+                .to_string(),
+        );
+    }
+    for id in &ids {
+        let job = app.wait_for_terminal(id, Duration::from_secs(150)).await;
+        assert_eq!(job["state"], "succeeded", "{job}");
+        assert_eq!(job["attempts"], 1);
+    }
+    let metrics = app
+        .client
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        metrics.contains("eyekey_solve_duration_seconds_bucket"),
+        "{metrics}"
+    );
+}

@@ -1,0 +1,72 @@
+use reqwest::StatusCode;
+
+use crate::helpers::{expect_json, spawn_app};
+
+#[tokio::test]
+async fn health_and_readiness_answer_without_a_token() {
+    let app = spawn_app().await;
+    let health = expect_json(
+        app.client.get(app.url("/healthz")).send().await.unwrap(),
+        StatusCode::OK,
+    )
+    .await;
+    assert_eq!(health["status"], "ok");
+    let ready = expect_json(
+        app.client.get(app.url("/readyz")).send().await.unwrap(),
+        StatusCode::OK,
+    )
+    .await;
+    assert_eq!(ready["status"], "ready");
+}
+
+#[tokio::test]
+async fn metrics_report_jobs_by_state_queue_depth_and_http_latency_by_route() {
+    let app = spawn_app().await;
+    let f = app.fixtures().await;
+    app.create_job(&f).await;
+    app.create_job(&f).await;
+    let text = app
+        .client
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(text.contains("eyekey_queue_depth"), "{text}");
+    assert!(text.contains("eyekey_jobs{state=\"queued\"}"), "{text}");
+    assert!(
+        text.contains("eyekey_http_request_duration_seconds_bucket"),
+        "{text}"
+    );
+    assert!(
+        text.contains("route=\"/v1/jobs\""),
+        "latency is labelled by route template: {text}"
+    );
+    assert!(text.contains("route=\"/v1/profiles\""));
+}
+
+#[tokio::test]
+async fn the_audit_log_cannot_be_changed() {
+    let app = spawn_app().await;
+    app.enrol(&crate::helpers::myope()).await;
+    let update = sqlx::query("UPDATE audit_log SET actor = 'someone else'")
+        .execute(&app.state.db)
+        .await;
+    assert!(update.unwrap_err().to_string().contains("append-only"));
+    let delete = sqlx::query("DELETE FROM audit_log")
+        .execute(&app.state.db)
+        .await;
+    assert!(delete.is_err());
+}
+
+#[tokio::test]
+async fn the_audit_log_never_holds_profile_contents() {
+    let app = spawn_app().await;
+    let id = app.enrol(&crate::helpers::myope()).await;
+    let audit = expect_json(app.op_get("/v1/audit").await, StatusCode::OK).await;
+    let text = audit.to_string();
+    assert!(text.contains(&format!("profiles/{id}")));
+    assert!(!text.contains("0.123456789") && !text.contains("zernike"));
+}

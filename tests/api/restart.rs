@@ -1,0 +1,93 @@
+use std::time::Duration;
+
+use reqwest::StatusCode;
+use serde_json::json;
+
+use crate::helpers::{expect_json, job_body, spawn_app_in};
+
+#[tokio::test]
+async fn everything_survives_a_restart_on_the_same_data_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = spawn_app_in(dir.path(), |_| {}).await;
+    let f = app.fixtures().await;
+    let job = app.create_job(&f).await;
+    app.stop().await;
+
+    let app = spawn_app_in(dir.path(), |_| {}).await;
+    let profile = expect_json(
+        app.op_get(&format!("/v1/profiles/{}", f.profile_id)).await,
+        StatusCode::OK,
+    )
+    .await;
+    assert_eq!(
+        profile["profile"]["zernike_um"][7], 0.123456789,
+        "the master key file is reused"
+    );
+    assert_eq!(
+        app.display_get(&f.display_token, "/v1/frames/jobs")
+            .await
+            .status(),
+        StatusCode::OK
+    );
+    let again = app.job(job["id"].as_str().unwrap()).await;
+    assert_eq!(again["state"], "queued", "a queued job is still queued");
+}
+
+/// Stops the server while a job is being solved and starts a new one on the same data directory: the
+/// job is re-queued on shutdown without losing an attempt and completes exactly once. Runs the real
+/// encoder.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_running_at_shutdown_completes_exactly_once_after_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let app = spawn_app_in(dir.path(), |c| c.workers = 1).await;
+    let f = app.fixtures().await;
+    let mut body = job_body(&f);
+    // Enough work that the job is still running when the server stops.
+    body["options"]["max_iterations"] = json!(400);
+    body["options"]["tolerance"] = json!(0.0);
+    let id = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let job = app.job(&id).await;
+        if job["state"] == "running" {
+            break;
+        }
+        assert_eq!(job["state"], "queued", "{job}");
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the job never started"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    app.stop().await;
+
+    let app = spawn_app_in(dir.path(), |c| c.workers = 1).await;
+    let job = app.job(&id).await;
+    assert!(
+        matches!(
+            job["state"].as_str(),
+            Some("queued" | "running" | "succeeded")
+        ),
+        "{job}"
+    );
+    let job = app.wait_for_terminal(&id, Duration::from_secs(120)).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    assert_eq!(job["attempts"], 1, "the interrupted attempt is not counted");
+    let outputs: Vec<_> = std::fs::read_dir(dir.path().join("jobs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        outputs,
+        vec![std::ffi::OsString::from(&id)],
+        "one output, no temporary leftovers"
+    );
+    let succeeded: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM jobs WHERE state = 'succeeded'")
+        .fetch_one(&app.state.db)
+        .await
+        .unwrap();
+    assert_eq!(succeeded.0, 1);
+}
