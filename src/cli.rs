@@ -29,6 +29,126 @@ pub enum Command {
     Example(ExampleCommand),
     /// Render what a person sees of an image shown plainly on the display, or of a frame bundle.
     Simulate(SimulateArgs),
+    /// Encode a document into a frame bundle that only the target can read.
+    Encode(EncodeArgs),
+    /// Measure who can read a frame bundle: target, observers, a sampled population, a camera.
+    Evaluate(EvaluateArgs),
+}
+
+/// Options of `eyekey encode`.
+#[derive(Args, Debug)]
+pub struct EncodeArgs {
+    /// Display description (JSON).
+    #[arg(long)]
+    pub display: PathBuf,
+    /// The target's vision profile (JSON).
+    #[arg(long)]
+    pub target: PathBuf,
+    /// A representative observer's profile, shown the decoy (repeatable).
+    #[arg(long)]
+    pub observer: Vec<PathBuf>,
+    /// A decoy image for the observers (implies --decoy-kind image).
+    #[arg(long)]
+    pub decoy: Option<PathBuf>,
+    /// What decoy observers see: noise, grey or image.
+    #[arg(long, value_enum)]
+    pub decoy_kind: Option<DecoyArg>,
+    /// Decoy observers sampled from the population.
+    #[arg(long)]
+    pub population_decoys: Option<u32>,
+    /// Weight of each decoy observer relative to the target.
+    #[arg(long)]
+    pub decoy_weight: Option<f64>,
+    /// Seed for sampling and jitter.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The document (PNG or JPEG).
+    #[arg(long)]
+    pub document: PathBuf,
+    /// Encoder.
+    #[arg(long, value_enum, default_value = "multiplex")]
+    pub method: MethodArg,
+    /// Ablation: optical or spectral.
+    #[arg(long, value_enum)]
+    pub ablation: Option<AblationArg>,
+    /// Solver iteration cap.
+    #[arg(long)]
+    pub max_iterations: Option<u32>,
+    /// Solver relative tolerance.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Sub-rays per light-field sample.
+    #[arg(long)]
+    pub sub_rays: Option<u32>,
+    /// λ_W of Eq. 16.
+    #[arg(long)]
+    pub lambda_w: Option<f64>,
+    /// λ_c of Eq. 16.
+    #[arg(long)]
+    pub lambda_c: Option<f64>,
+    /// Output bundle directory (must not exist).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Encoder names on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MethodArg {
+    /// Eq. 14 with K observers.
+    Multiplex,
+    /// Eq. 16.
+    Diffmax,
+    /// Both.
+    Combined,
+}
+
+/// Ablations on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum AblationArg {
+    /// Optical key only.
+    Optical,
+    /// Spectral key only.
+    Spectral,
+}
+
+/// Decoy kinds on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum DecoyArg {
+    /// Random high-contrast mask.
+    Noise,
+    /// Mid grey.
+    Grey,
+    /// The --decoy image.
+    Image,
+}
+
+/// Options of `eyekey evaluate`.
+#[derive(Args, Debug)]
+pub struct EvaluateArgs {
+    /// Frame bundle directory or zip.
+    #[arg(long)]
+    pub bundle: PathBuf,
+    /// The target's vision profile.
+    #[arg(long)]
+    pub target: PathBuf,
+    /// The document the bundle encodes.
+    #[arg(long)]
+    pub document: PathBuf,
+    /// Further observers to score (repeatable).
+    #[arg(long)]
+    pub observer: Vec<PathBuf>,
+    /// People sampled from the population statistics.
+    #[arg(long, default_value_t = 50)]
+    pub population: u32,
+    /// Seed of the population sample.
+    #[arg(long, default_value_t = 20_000)]
+    pub seed: u64,
+    /// Legibility threshold.
+    #[arg(long, default_value_t = crate::evaluate::DEFAULT_THRESHOLD)]
+    pub threshold: f64,
+    /// Output directory (report.json, views/).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// `eyekey example ...`
@@ -147,6 +267,8 @@ pub fn run(cli: Cli) -> Result<()> {
             imaging::save_rgb_png(&crate::glyphs::render_text(&lines, width, height, scale), &out)?;
         }
         Command::Simulate(a) => simulate(&a)?,
+        Command::Encode(a) => encode(&a)?,
+        Command::Evaluate(a) => evaluate(&a)?,
     }
     Ok(())
 }
@@ -186,7 +308,25 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
     let observer = Observer::new(&display, &profile, eye, &options)?;
     let l = match (&a.image, &a.frames) {
         (Some(img), _) => plain_light_field_for_image(&display, &imaging::load_image(img)?),
-        (None, Some(_bundle)) => bail!("--frames needs a frame bundle reader, which this build does not have yet"),
+        (None, Some(bundle)) => {
+            let (manifest, l) = crate::bundle::read_bundle(bundle)?;
+            if manifest.display != display {
+                bail!(
+                    "bundle {} was made for a different display than {} (holes {}×{}, views {}×{} vs {}×{}, {}×{})",
+                    bundle.display(),
+                    a.display.display(),
+                    manifest.display.holes_x,
+                    manifest.display.holes_y,
+                    manifest.display.views_u,
+                    manifest.display.views_v,
+                    display.holes_x,
+                    display.holes_y,
+                    display.views_u,
+                    display.views_v
+                );
+            }
+            l
+        }
         (None, None) => bail!("give --image or --frames"),
     };
     let view = observer.view(&l);
@@ -198,5 +338,141 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
         observer.transport.grid.height,
         100.0 * observer.transport.stats.sub_rays_in_pupil as f64 / observer.transport.stats.sub_rays_traced as f64
     );
+    Ok(())
+}
+
+/// A progress bar on a terminal, nothing otherwise.
+fn progress_bar(label: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(1000);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {percent:>3}% {elapsed_precise}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_message(label.to_string());
+    bar
+}
+
+fn encode(a: &EncodeArgs) -> Result<()> {
+    use crate::pipeline::{Ablation, DecoyKind, EncodeOptions, JobSpec, Method};
+    if a.out.exists() {
+        bail!("--out {} already exists; choose a new directory", a.out.display());
+    }
+    let display = read_display(&a.display)?;
+    let target = read_profile(&a.target)?;
+    let observers = a.observer.iter().map(|p| read_profile(p)).collect::<Result<Vec<_>>>()?;
+    let document = imaging::load_image(&a.document)?;
+    let decoy = a.decoy.as_deref().map(imaging::load_image).transpose()?;
+    let d = EncodeOptions::default();
+    let options = EncodeOptions {
+        method: match a.method {
+            MethodArg::Multiplex => Method::Multiplex,
+            MethodArg::Diffmax => Method::Diffmax,
+            MethodArg::Combined => Method::Combined,
+        },
+        ablation: a.ablation.map(|x| match x {
+            AblationArg::Optical => Ablation::Optical,
+            AblationArg::Spectral => Ablation::Spectral,
+        }),
+        population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
+        decoy: match (a.decoy_kind, &decoy) {
+            (Some(DecoyArg::Noise), _) => DecoyKind::Noise,
+            (Some(DecoyArg::Grey), _) => DecoyKind::Grey,
+            (Some(DecoyArg::Image), _) | (None, Some(_)) => DecoyKind::Image,
+            (None, None) => d.decoy,
+        },
+        decoy_weight: a.decoy_weight.unwrap_or(d.decoy_weight),
+        seed: a.seed.unwrap_or(d.seed),
+        sub_rays: a.sub_rays.unwrap_or(d.sub_rays),
+        max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
+        tolerance: a.tolerance.unwrap_or(d.tolerance),
+        lambda_w: a.lambda_w.unwrap_or(d.lambda_w),
+        lambda_c: a.lambda_c.unwrap_or(d.lambda_c),
+        evaluation_population: 0,
+    };
+    if options.decoy == DecoyKind::Image && decoy.is_none() {
+        bail!("--decoy-kind image needs --decoy IMAGE");
+    }
+    let spec = JobSpec {
+        display,
+        target,
+        target_label: a.target.display().to_string(),
+        observers,
+        document,
+        decoy,
+        options,
+    };
+    let bar = progress_bar("encoding");
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let started = std::time::Instant::now();
+    let encoded = crate::pipeline::encode(&spec, &|p| bar.set_position((p * 1000.0) as u64), &cancel)?;
+    crate::pipeline::write_outputs(&spec, &encoded, &a.out, false, &|_| {}, &cancel)?;
+    bar.finish_and_clear();
+    eprintln!(
+        "wrote {} in {:.1} s (solver: {} iterations, {})",
+        a.out.display(),
+        started.elapsed().as_secs_f64(),
+        encoded.solver["iterations"],
+        encoded.solver["termination"]
+    );
+    Ok(())
+}
+
+fn evaluate(a: &EvaluateArgs) -> Result<()> {
+    use crate::evaluate::EvaluationOptions;
+    let (manifest, l) = crate::bundle::read_bundle(&a.bundle)?;
+    let target = read_profile(&a.target)?;
+    let document = imaging::load_image(&a.document)?;
+    let observers = a
+        .observer
+        .iter()
+        .map(|p| Ok((p.display().to_string(), read_profile(p)?)))
+        .collect::<Result<Vec<_>>>()?;
+    if !(0.0..=1.0).contains(&a.threshold) {
+        bail!("--threshold must be within 0..=1, got {}", a.threshold);
+    }
+    if a.population > 2000 {
+        bail!("--population must be at most 2000, got {}", a.population);
+    }
+    let options = EvaluationOptions { population: a.population, seed: a.seed, threshold: a.threshold, ..Default::default() };
+    let bar = progress_bar("evaluating");
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let ev = crate::evaluate::evaluate(
+        &manifest.display,
+        &l,
+        &document,
+        crate::pipeline::OBJECTIVE_LEVEL,
+        &target,
+        &observers,
+        &options,
+        &|p| bar.set_position((p * 1000.0) as u64),
+        &cancel,
+    )?;
+    bar.finish_and_clear();
+    crate::pipeline::write_evaluation(&ev, &a.out)?;
+    let r = &ev.report;
+    println!("target: legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}", r.target.legibility, r.target.psnr_db, r.target.ssim);
+    for o in &r.observers {
+        println!("{}: legibility {:.2}{}", o.label, o.legibility, if o.readable { " (READS)" } else { "" });
+    }
+    if let Some(p) = &r.population {
+        println!(
+            "population: {}/{} can read (median legibility {:.2}, 95th percentile {:.2}, max {:.2})",
+            p.readable_count, p.count, p.median_legibility, p.p95_legibility, p.max_legibility
+        );
+    }
+    if let Some(c) = &r.camera {
+        println!("camera attacker best: {} legibility {:.2}", c.best.label, c.best.legibility);
+    }
+    if let Some(k) = &r.key_sensitivity {
+        println!(
+            "key: optical radius {:.3} µm ({:.1} bits), spectral radius {:.2} SD ({:.1} bits), empirical ≥ {:.1} bits",
+            k.optical_radius_um, k.optical_bits, k.spectral_radius_sd, k.spectral_bits, k.empirical_bits
+        );
+    }
+    println!("wrote {}", a.out.join("report.json").display());
     Ok(())
 }

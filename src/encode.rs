@@ -1,7 +1,7 @@
 //! Encoders (paper §6): turn objective images for several observers into one light field.
 //!
 //! * [`MultiplexObjective`]: Eq. 14 generalised to K weighted observers,
-//!   Σ_k w_k ‖A_k L − S'_k‖² (+ μ‖L‖²), A_k = C_k ⊗ T_k.
+//!   Σ_k w_k ‖A_k L − S'_k‖² (+ μ‖L‖²/P, a mean-square Tikhonov term), A_k = C_k ⊗ T_k.
 //! * [`DiffMaxObjective`]: Eq. 16, ‖A_t L − S'_t‖² − λ_W Σ_j ‖∂S_t/∂W_j‖² − λ_c ‖∂S_t/∂c‖², where
 //!   ∂S_t/∂W_j = (C_t ⊗ ∂T/∂W_j) L (analytic, see [`crate::transport`]) and ∂S_a/∂c_na = T L_n, so
 //!   ‖∂S_t/∂c‖² = 3 Σ_n ‖T L_n‖². Non-convex; minimised by the monotone FISTA of [`crate::solve`].
@@ -38,7 +38,7 @@ struct Scratch {
     field: Vec<f32>,
 }
 
-/// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖².
+/// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖²/P over the P unknowns.
 pub struct MultiplexObjective<'a> {
     terms: Vec<Term<'a>>,
     n_unknowns: usize,
@@ -48,10 +48,12 @@ pub struct MultiplexObjective<'a> {
 }
 
 impl<'a> MultiplexObjective<'a> {
-    /// Builds the objective; `reference_energy` (usually ‖S'_t‖²) normalises every term.
+    /// Builds the objective; `reference_energy` (usually ‖S'_t‖²) normalises every data term, and the
+    /// Tikhonov weight μ applies to the mean square of L.
     pub fn new(terms: Vec<Term<'a>>, n_bands: usize, reference_energy: f64, tikhonov: f64) -> Self {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.transport.n_samples() * n_bands;
+        let tikhonov = tikhonov / n_unknowns.max(1) as f64;
         let n_pixels = terms.iter().map(|t| t.observer.transport.n_pixels()).max().unwrap_or(0);
         Self {
             terms,
@@ -216,12 +218,12 @@ impl Objective for DiffMaxObjective<'_> {
 }
 
 /// The spectral-only ablation: unknowns are one value per hole and band; every view of a hole is equal.
-pub struct TiedViews<'a, O: Objective> {
+pub struct TiedViews<'a, O: Objective + ?Sized> {
     inner: &'a O,
     display: &'a DisplayGeometry,
 }
 
-impl<'a, O: Objective> TiedViews<'a, O> {
+impl<'a, O: Objective + ?Sized> TiedViews<'a, O> {
     /// Wraps an objective over full light fields.
     pub fn new(inner: &'a O, display: &'a DisplayGeometry) -> Self {
         Self { inner, display }
@@ -251,7 +253,7 @@ impl<'a, O: Objective> TiedViews<'a, O> {
     }
 }
 
-impl<O: Objective> Objective for TiedViews<'_, O> {
+impl<O: Objective + ?Sized> Objective for TiedViews<'_, O> {
     fn dim(&self) -> usize {
         (self.display.holes_x * self.display.holes_y) as usize * self.display.n_bands()
     }

@@ -7,6 +7,7 @@ pub mod bundle;
 pub mod cli;
 pub mod display;
 pub mod encode;
+pub mod evaluate;
 pub mod glyphs;
 pub mod imaging;
 pub mod observer;

@@ -1,6 +1,8 @@
 //! An observer of the display: one person (or camera) at one eye position, with their transport operator and
 //! their spectral coupling (Eq. 13: S_a = Σ_n c_na T L_n).
 
+use std::sync::Arc;
+
 use image::RgbImage;
 
 use crate::display::DisplayGeometry;
@@ -8,7 +10,7 @@ use crate::imaging;
 use crate::optics::profile::{ProfileError, VisionProfile};
 use crate::optics::zernike::ZernikeCoefficients;
 use crate::spectral::{coupling, ConeFundamentals};
-use crate::transport::{EyePosition, TransportError, TransportMatrix, TransportOptions};
+use crate::transport::{EyePosition, TransportCache, TransportError, TransportMatrix, TransportOptions};
 
 /// Errors building an observer.
 #[derive(Debug, thiserror::Error)]
@@ -26,7 +28,7 @@ pub enum ObserverError {
 #[derive(Clone, Debug)]
 pub struct Observer {
     /// Transport from the light field to this observer's retinal grid.
-    pub transport: TransportMatrix,
+    pub transport: Arc<TransportMatrix>,
     /// c_na per band n, as f32 for the kernels.
     pub coupling: Vec<[f32; 3]>,
     /// c_na per band n.
@@ -56,13 +58,13 @@ impl Observer {
         eye: EyePosition,
         options: &TransportOptions,
     ) -> Result<Self, ObserverError> {
-        let transport = TransportMatrix::build(display, wavefront, eye, options)?;
+        let transport = TransportCache::global().get_or_build(display, wavefront, eye, options)?;
         let c = coupling(&display.projectors, cones);
         Ok(Self::with_coupling(transport, c.c, display.l_max))
     }
 
     /// An observer from a transport operator and a coupling matrix.
-    pub fn with_coupling(transport: TransportMatrix, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
+    pub fn with_coupling(transport: Arc<TransportMatrix>, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
         let white = std::array::from_fn(|a| coupling_f64.iter().map(|c| c[a]).sum::<f64>() * l_max);
         let coupling = coupling_f64.iter().map(|c| [c[0] as f32, c[1] as f32, c[2] as f32]).collect();
         Self { transport, coupling, coupling_f64, white }

@@ -141,6 +141,194 @@ pub enum PipelineError {
     Internal(String),
 }
 
+/// Fraction of the display white the target is asked to see for document white: the rest is headroom the
+/// encoder uses to show decoys to everybody else.
+pub const OBJECTIVE_LEVEL: f64 = 0.5;
+
+/// OSA terms whose ∂T/∂W_j the difference-maximisation encoder penalises: orders 2–3 (j = 3..=9), where the
+/// population varies most (Indiana SDs of 0.1–0.37 µm at 6 mm).
+pub const DIFFMAX_TERMS: std::ops::RangeInclusive<usize> = 3..=9;
+
+impl EncodeOptions {
+    /// Checks every option's range; errors name the field.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let bad = |field: &str, why: String| Err(PipelineError::Invalid(format!("options.{field}: {why}")));
+        if !(1..=256).contains(&self.sub_rays) {
+            return bad("sub_rays", format!("must be within 1..=256, got {}", self.sub_rays));
+        }
+        if !(1..=20_000).contains(&self.max_iterations) {
+            return bad("max_iterations", format!("must be within 1..=20000, got {}", self.max_iterations));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return bad("tolerance", format!("must be within (0, 1), got {}", self.tolerance));
+        }
+        if self.population_decoys > 64 {
+            return bad("population_decoys", format!("at most 64, got {}", self.population_decoys));
+        }
+        if !(self.decoy_weight.is_finite() && (0.0..=100.0).contains(&self.decoy_weight)) {
+            return bad("decoy_weight", format!("must be within 0..=100, got {}", self.decoy_weight));
+        }
+        for (name, v) in [("lambda_w", self.lambda_w), ("lambda_c", self.lambda_c)] {
+            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                return bad(name, format!("must be within 0..=100, got {v}"));
+            }
+        }
+        if self.evaluation_population > 2000 {
+            return bad("evaluation_population", format!("at most 2000, got {}", self.evaluation_population));
+        }
+        Ok(())
+    }
+}
+
+fn aspect_matches(img: &image::RgbImage, display: &DisplayGeometry) -> bool {
+    let a = img.width() as f64 / img.height() as f64;
+    let b = display.holes_x as f64 / display.holes_y as f64;
+    (a / b - 1.0).abs() <= 0.05
+}
+
+/// The light field and what the solver did.
+pub struct Encoded {
+    /// Band-interleaved light field, `l[p·N + n]`, in [0, L_max].
+    pub light_field: Vec<f32>,
+    /// The solver's result (without the light field).
+    pub solver: serde_json::Value,
+}
+
+/// Encodes a job's document into a light field (no files written).
+pub fn encode(
+    spec: &JobSpec,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<Encoded, PipelineError> {
+    use crate::encode::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
+    use crate::observer::Observer;
+    use crate::solve::{minimise, Objective, SolverOptions};
+    use crate::transport::{EyePosition, TransportOptions};
+
+    let o = &spec.options;
+    o.validate()?;
+    let d = &spec.display;
+    d.validate().map_err(|e| PipelineError::Invalid(format!("display: {e}")))?;
+    spec.target.validate().map_err(|e| PipelineError::Invalid(format!("target profile: {e}")))?;
+    for (k, p) in spec.observers.iter().enumerate() {
+        p.validate().map_err(|e| PipelineError::Invalid(format!("observers[{k}]: {e}")))?;
+    }
+    if !aspect_matches(&spec.document, d) {
+        return Err(PipelineError::Invalid(format!(
+            "document is {}×{} pixels but the display is {}×{} holes: aspect ratios differ by more than 5 %",
+            spec.document.width(),
+            spec.document.height(),
+            d.holes_x,
+            d.holes_y
+        )));
+    }
+    if let Some(decoy) = &spec.decoy {
+        if !aspect_matches(decoy, d) {
+            return Err(PipelineError::Invalid(format!(
+                "decoy is {}×{} pixels; its aspect ratio must match the display's {}×{} holes",
+                decoy.width(),
+                decoy.height(),
+                d.holes_x,
+                d.holes_y
+            )));
+        }
+    }
+    let diffmax = matches!(o.method, Method::Diffmax | Method::Combined);
+    let base = TransportOptions { sub_rays: o.sub_rays, seed: o.seed, retina_oversample: 1, derivative_terms: vec![] };
+    let target_opts =
+        TransportOptions { derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] }, ..base.clone() };
+    let internal = |e: crate::observer::ObserverError| PipelineError::Invalid(e.to_string());
+    let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts).map_err(internal)?;
+    progress(0.05);
+
+    // Everybody who must NOT read: given observers, then decoys sampled from the population.
+    let mut others_profiles = spec.observers.clone();
+    if !matches!(o.method, Method::Diffmax) {
+        others_profiles.extend(crate::population::sample_population(
+            o.population_decoys as usize,
+            o.seed.wrapping_add(1),
+            Default::default(),
+        ));
+    } else {
+        others_profiles.clear();
+    }
+    let mut others = Vec::with_capacity(others_profiles.len());
+    for (k, p) in others_profiles.iter().enumerate() {
+        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(PipelineError::Cancelled);
+        }
+        let mut obs = Observer::new(d, p, EyePosition::default(), &base).map_err(internal)?;
+        if o.ablation == Some(Ablation::Optical) {
+            // Optical only: the spectral key is taken away by giving everybody the target's cones.
+            obs = Observer::with_coupling(obs.transport.clone(), target.coupling_f64.clone(), d.l_max);
+        }
+        others.push(obs);
+        progress(0.05 + 0.1 * (k + 1) as f64 / others_profiles.len() as f64);
+    }
+    let g = target.transport.grid;
+    let target_obj = target.objective(&spec.document, OBJECTIVE_LEVEL);
+    let energy: f64 = target_obj.iter().map(|v| (*v as f64).powi(2)).sum();
+    let mut terms = vec![Term { observer: &target, objective: target_obj, weight: 1.0 }];
+    for (k, obs) in others.iter().enumerate() {
+        let decoy_img = match (o.decoy, &spec.decoy) {
+            (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
+            (DecoyKind::Image, Some(img)) => img.clone(),
+            _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
+        };
+        terms.push(Term { observer: obs, objective: obs.objective(&decoy_img, OBJECTIVE_LEVEL), weight: o.decoy_weight });
+    }
+    let data = MultiplexObjective::new(terms, d.n_bands(), energy, 1e-4);
+    let dm;
+    let objective: &dyn Objective = if diffmax {
+        dm = DiffMaxObjective::new(data, &target, o.lambda_w, o.lambda_c);
+        &dm
+    } else {
+        &data
+    };
+    let solver_opts = SolverOptions { max_iterations: o.max_iterations, tolerance: o.tolerance, ..Default::default() };
+    let max_it = o.max_iterations as f64;
+    let mut report = |p: crate::solve::Progress| progress(0.15 + 0.7 * p.iteration as f64 / max_it);
+    let l_max = d.l_max as f32;
+    // Warm start: the document shown plainly at the objective level.
+    let plain = crate::observer::plain_light_field_for_image(d, &spec.document);
+    let (l, result) = if o.ablation == Some(Ablation::Spectral) {
+        let tied = TiedViews::new(objective, d);
+        let n = d.n_bands();
+        let x0: Vec<f32> = (0..(d.holes_x * d.holes_y) as usize * n)
+            .map(|h| {
+                let (hx, hy) = ((h / n) as u32 % d.holes_x, (h / n) as u32 / d.holes_x);
+                plain[d.sample_index(hx, hy, 0, 0) * n + h % n] * OBJECTIVE_LEVEL as f32
+            })
+            .collect();
+        let r = minimise(&tied, x0, 0.0, l_max, &solver_opts, &mut report, cancel);
+        (tied.expand(&r.x), r)
+    } else {
+        let x0: Vec<f32> = plain.iter().map(|v| v * OBJECTIVE_LEVEL as f32).collect();
+        let r = minimise(objective, x0, 0.0, l_max, &solver_opts, &mut report, cancel);
+        (r.x.clone(), r)
+    };
+    if result.termination == crate::solve::Termination::Cancelled {
+        return Err(PipelineError::Cancelled);
+    }
+    if result.termination == crate::solve::Termination::NumericalFailure {
+        return Err(PipelineError::Internal("the solver's objective became non-finite".into()));
+    }
+    progress(0.85);
+    let solver = serde_json::json!({
+        "algorithm": "FISTA with gradient restart, step 1/L (power iteration)",
+        "iterations": result.iterations,
+        "restarts": result.restarts,
+        "termination": result.termination,
+        "objective": result.objective,
+        "objective_history": result.history,
+        "lipschitz": result.lipschitz,
+        "seconds": result.seconds,
+        "observers": others.len() + 1,
+        "unknowns": l.len(),
+    });
+    Ok(Encoded { light_field: l, solver })
+}
+
 /// Runs one job and writes its bundle (frames, barrier mask, manifest) and evaluation into `out_dir`.
 pub fn run_job(
     spec: &JobSpec,
@@ -148,6 +336,95 @@ pub fn run_job(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<JobOutput, PipelineError> {
-    let _ = (spec, out_dir, progress, cancel);
-    Err(PipelineError::Internal("the encoder pipeline is not built yet".into()))
+    let encoded = encode(spec, &|p| progress(0.8 * p), cancel)?;
+    write_outputs(spec, &encoded, out_dir, true, &|p| progress(0.8 + 0.2 * p), cancel)
+}
+
+/// Evaluates an encoded light field (when `with_evaluation`), then writes its bundle into `out_dir` and the
+/// evaluation beside it (report.json, views/).
+pub fn write_outputs(
+    spec: &JobSpec,
+    encoded: &Encoded,
+    out_dir: &Path,
+    with_evaluation: bool,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<JobOutput, PipelineError> {
+    use crate::evaluate::{evaluate, EvaluationOptions};
+    let io = |e: std::io::Error| PipelineError::Internal(format!("writing {}: {e}", out_dir.display()));
+    let document_sha256 = {
+        use sha2::Digest;
+        hex::encode(sha2::Sha256::digest(spec.document.as_raw()))
+    };
+    let meta = crate::bundle::BundleMeta {
+        profile_label: spec.target_label.clone(),
+        document_sha256,
+        encoder: serde_json::to_value(&spec.options).map_err(|e| PipelineError::Internal(e.to_string()))?,
+        solver: encoded.solver.clone(),
+    };
+    // Evaluate first, so a cancelled or failed evaluation leaves no bundle behind.
+    let eval_opts = EvaluationOptions {
+        population: spec.options.evaluation_population,
+        seed: spec.options.seed.wrapping_add(20_000),
+        sub_rays: spec.options.sub_rays,
+        ..Default::default()
+    };
+    let labelled: Vec<(String, VisionProfile)> =
+        spec.observers.iter().enumerate().map(|(k, p)| (format!("observer_{k}"), p.clone())).collect();
+    let evaluation = if !with_evaluation {
+        None
+    } else {
+        Some(evaluate(
+        &spec.display,
+        &encoded.light_field,
+        &spec.document,
+        OBJECTIVE_LEVEL,
+        &spec.target,
+        &labelled,
+        &eval_opts,
+        &|p| progress(0.9 * p),
+        cancel,
+    )
+    .map_err(|e| match e {
+        crate::evaluate::EvaluationError::Cancelled => PipelineError::Cancelled,
+        other => PipelineError::Internal(other.to_string()),
+    })?)
+    };
+    let manifest = crate::bundle::write_bundle(out_dir, &spec.display, &encoded.light_field, &meta, &[], 4)
+        .map_err(|e| PipelineError::Internal(e.to_string()))?;
+    // Operator-only outputs live beside the bundle and are never listed in its manifest.
+    let mut files = Vec::new();
+    let mut report = serde_json::Value::Null;
+    if let Some(evaluation) = &evaluation {
+        report = serde_json::to_value(&evaluation.report).map_err(|e| PipelineError::Internal(e.to_string()))?;
+        files.extend(write_evaluation(evaluation, out_dir).map_err(io)?);
+    }
+    for f in &manifest.files {
+        files.push(out_dir.join(&f.name));
+    }
+    files.push(out_dir.join(crate::bundle::MANIFEST_FILE));
+    progress(1.0);
+    Ok(JobOutput {
+        manifest: serde_json::to_value(&manifest).map_err(|e| PipelineError::Internal(e.to_string()))?,
+        evaluation: report,
+        files,
+    })
+}
+
+/// Writes `report.json` and `views/*.png` of an evaluation into `dir`; returns the paths written.
+pub fn write_evaluation(evaluation: &crate::evaluate::Evaluation, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    std::fs::create_dir_all(dir)?;
+    let report_path = dir.join("report.json");
+    let text = serde_json::to_vec_pretty(&evaluation.report).map_err(std::io::Error::other)?;
+    std::fs::write(&report_path, text)?;
+    files.push(report_path);
+    let views = dir.join("views");
+    std::fs::create_dir_all(&views)?;
+    for (name, pic) in &evaluation.pictures {
+        let path = views.join(name);
+        crate::imaging::save_rgb_png(pic, &path).map_err(std::io::Error::other)?;
+        files.push(path);
+    }
+    Ok(files)
 }

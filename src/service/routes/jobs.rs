@@ -17,7 +17,7 @@ use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::pipeline::{EncodeOptions, Method};
+use crate::pipeline::{EncodeOptions, Method, PipelineError};
 use crate::service::auth::{Operator, OPERATOR};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::BundleFile;
@@ -180,41 +180,18 @@ impl TryFrom<&JobRow> for JobView {
     }
 }
 
-/// Bounds that keep one job from monopolising the service; the pipeline checks the physics.
+/// The pipeline's own range checks, reported with the offending field.
 fn check_options(o: &EncodeOptions) -> Result<(), ApiError> {
-    let bound = |field: &str, v: u64, lo: u64, hi: u64| {
-        if (lo..=hi).contains(&v) {
-            Ok(())
-        } else {
-            Err(ApiError::invalid(
-                format!("options.{field}"),
-                format!("{field} must be within {lo}..={hi}, got {v}"),
-            ))
+    o.validate().map_err(|e| {
+        let text = match e {
+            PipelineError::Invalid(text) => text,
+            other => other.to_string(),
+        };
+        match text.split_once(": ") {
+            Some((field, why)) if !field.contains(' ') => ApiError::invalid(field, why),
+            _ => ApiError::Invalid { field: Some("options".into()), message: text },
         }
-    };
-    bound("max_iterations", o.max_iterations.into(), 1, 100_000)?;
-    bound("sub_rays", o.sub_rays.into(), 1, 1024)?;
-    bound("population_decoys", o.population_decoys.into(), 0, 64)?;
-    bound(
-        "evaluation_population",
-        o.evaluation_population.into(),
-        0,
-        1000,
-    )?;
-    for (field, v) in [
-        ("tolerance", o.tolerance),
-        ("decoy_weight", o.decoy_weight),
-        ("lambda_w", o.lambda_w),
-        ("lambda_c", o.lambda_c),
-    ] {
-        if !v.is_finite() || v < 0.0 {
-            return Err(ApiError::invalid(
-                format!("options.{field}"),
-                format!("{field} must be finite and ≥ 0, got {v}"),
-            ));
-        }
-    }
-    Ok(())
+    })
 }
 
 fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
