@@ -114,8 +114,8 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
             file["name"]
         );
     }
-    for name in ["frame_0.png"] {
-        let mut entry = zip.by_name(name).unwrap();
+    {
+        let mut entry = zip.by_name("frame_0.png").unwrap();
         let mut bytes = Vec::new();
         entry.read_to_end(&mut bytes).unwrap();
         let frame = image::load_from_memory(&bytes).unwrap();
@@ -126,6 +126,12 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
             "frames are 16-bit grey"
         );
     }
+
+    // The crate's own bundle reader accepts the downloaded zip (it verifies every size and checksum).
+    let zip_path = app.data_dir.join("downloaded.zip");
+    std::fs::write(&zip_path, &zip_bytes).unwrap();
+    let (manifest, light_field) = eyekey::bundle::read_bundle(&zip_path).unwrap();
+    assert_eq!(manifest.display, crate::helpers::tiny_display());
 
     // The operator reads the evaluation and the simulated views.
     let report = expect_json(
@@ -148,6 +154,46 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         ))
         .await;
     assert_eq!(r.status(), StatusCode::OK);
+
+    // The target's view simulated from the downloaded bundle scores as the job's own evaluation says.
+    // Same observer as the evaluation (its transport seed: the job's seed + 20000, xor 0xE7A1); the only
+    // difference is the frames' 16-bit quantisation.
+    let options: eyekey::pipeline::EncodeOptions =
+        serde_json::from_value(last["options"].clone()).unwrap();
+    let transport = eyekey::transport::TransportOptions {
+        sub_rays: options.sub_rays,
+        seed: options.seed.wrapping_add(20_000) ^ 0xE7A1,
+        ..Default::default()
+    };
+    let observer = eyekey::observer::Observer::new(
+        &manifest.display,
+        &crate::helpers::myope(),
+        eyekey::transport::EyePosition::default(),
+        &transport,
+    )
+    .unwrap();
+    let grid = observer.transport.grid;
+    let document = image::load_from_memory(&crate::helpers::document_png(24, 24))
+        .unwrap()
+        .to_rgb8();
+    let reference = eyekey::evaluate::Reference::new(
+        &document,
+        grid.width,
+        grid.height,
+        eyekey::pipeline::OBJECTIVE_LEVEL,
+        report["threshold"].as_f64().unwrap(),
+    );
+    let (score, _) = reference.score_observer("target", &observer, &light_field);
+    let reported = &report["target"];
+    assert!(
+        (score.legibility - reported["legibility"].as_f64().unwrap()).abs() < 1e-3,
+        "{score:?} vs {reported}"
+    );
+    assert!(
+        (score.psnr_db - reported["psnr_db"].as_f64().unwrap()).abs() < 0.05,
+        "{score:?} vs {reported}"
+    );
+    assert_eq!(score.readable, reported["readable"].as_bool().unwrap());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -189,7 +189,10 @@ fn check_options(o: &EncodeOptions) -> Result<(), ApiError> {
         };
         match text.split_once(": ") {
             Some((field, why)) if !field.contains(' ') => ApiError::invalid(field, why),
-            _ => ApiError::Invalid { field: Some("options".into()), message: text },
+            _ => ApiError::Invalid {
+                field: Some("options".into()),
+                message: text,
+            },
         }
     })
 }
