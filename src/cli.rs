@@ -33,6 +33,28 @@ pub enum Command {
     Encode(EncodeArgs),
     /// Measure who can read a frame bundle: target, observers, a sampled population, a camera.
     Evaluate(EvaluateArgs),
+    /// Benchmarks: transport build, sparse kernels, solver, whole encode; figures go to a Markdown file.
+    Bench(BenchArgs),
+}
+
+/// Options of `eyekey bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Display preset to benchmark.
+    #[arg(long, default_value = "paper")]
+    pub preset: String,
+    /// Sub-rays per light-field sample.
+    #[arg(long, default_value_t = 16)]
+    pub sub_rays: u32,
+    /// Which benchmark: transport, solver, encode or all.
+    #[arg(long, default_value = "all")]
+    pub section: String,
+    /// Markdown file whose `<!-- bench:… -->` sections are replaced with the new figures.
+    #[arg(long, default_value = "BENCHMARKS.md")]
+    pub out: PathBuf,
+    /// Also export the 2-observer solver problem (Matrix Market) into this directory for an external solver.
+    #[arg(long)]
+    pub export: Option<PathBuf>,
 }
 
 /// Options of `eyekey encode`.
@@ -269,6 +291,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(a) => simulate(&a)?,
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
+        Command::Bench(a) => bench(&a)?,
     }
     Ok(())
 }
@@ -474,5 +497,82 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         );
     }
     println!("wrote {}", a.out.join("report.json").display());
+    Ok(())
+}
+
+fn bench(a: &BenchArgs) -> Result<()> {
+    use crate::bench::*;
+    let display = DisplayGeometry::preset(&a.preset)?;
+    let all = a.section == "all";
+    if !["all", "transport", "solver", "encode"].contains(&a.section.as_str()) {
+        bail!("--section must be transport, solver, encode or all, got {:?}", a.section);
+    }
+    let cmd = format!("eyekey bench --preset {} --sub-rays {} --section {}", a.preset, a.sub_rays, a.section);
+    let stamp = chrono::Utc::now().format("%Y-%m-%d %H:%M UTC");
+    if all || a.section == "transport" {
+        let body = format!("Measured {stamp} by `{cmd}` (release build):\n\n{}", transport_bench(&display, a.sub_rays)?);
+        print!("{body}");
+        write_section(&a.out, "transport", &body)?;
+    }
+    if all || a.section == "solver" {
+        let mut body = format!(
+            "Measured {stamp} by `{cmd}` (release build). Time and iterations to reach an objective within 1e-3 \
+             (relative) of the optimum found by a 3000-iteration, 1e-9-tolerance run from the same start.\n\n\
+             | problem | observers | unknowns | optimum f* | iterations to 1e-3 | time to 1e-3 | ms / iteration | peak memory |\n\
+             | --- | --- | --- | --- | --- | --- | --- | --- |\n"
+        );
+        for k in [2usize, 8] {
+            let problem = BenchProblem::new(&display, k, a.sub_rays)?;
+            if k == 2 {
+                if let Some(dir) = &a.export {
+                    problem.export(dir)?;
+                    let (row, f_star, secs) = solver_bench(&problem, &format!("{} multiplex", a.preset))?;
+                    body.push_str(&row);
+                    std::fs::write(
+                        dir.join("eyekey_result.json"),
+                        serde_json::to_string_pretty(&serde_json::json!({"f_star": f_star, "seconds_to_1e-3": secs}))?,
+                    )?;
+                    continue;
+                }
+            }
+            body.push_str(&solver_bench(&problem, &format!("{} multiplex", a.preset))?.0);
+        }
+        print!("{body}");
+        write_section(&a.out, "solver", &body)?;
+    }
+    if all || a.section == "encode" {
+        use crate::pipeline::{EncodeOptions, JobSpec};
+        crate::transport::TransportCache::global().set_capacity_bytes(0);
+        let g = (display.holes_x * 4, display.holes_y * 4);
+        let spec = JobSpec {
+            display: display.clone(),
+            target: VisionProfile::perfect(),
+            target_label: "bench".into(),
+            observers: crate::population::sample_population(1, 3, Default::default()),
+            document: crate::glyphs::render_text(&["PIN", "4821"], g.0, g.1, (g.0 / 32).max(1)),
+            decoy: None,
+            options: EncodeOptions { population_decoys: 0, sub_rays: a.sub_rays, ..Default::default() },
+        };
+        let dir = tempfile::tempdir()?;
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let t = std::time::Instant::now();
+        let encoded = crate::pipeline::encode(&spec, &|_| {}, &cancel)?;
+        let t_solve = t.elapsed().as_secs_f64();
+        crate::pipeline::write_outputs(&spec, &encoded, &dir.path().join("bundle"), false, &|_| {}, &cancel)?;
+        let total = t.elapsed().as_secs_f64();
+        let body = format!(
+            "Measured {stamp} by `{cmd}` (release build, transport cache disabled: a cold start).\n\n\
+             | quantity | value |\n| --- | --- |\n\
+             | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
+             | of which transport + solve | {t_solve:.2} s ({} iterations, {}) |\n\
+             | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
+            encoded.solver["iterations"],
+            encoded.solver["termination"],
+            total - t_solve,
+            peak_memory_bytes() as f64 / 1e6
+        );
+        print!("{body}");
+        write_section(&a.out, "encode", &body)?;
+    }
     Ok(())
 }

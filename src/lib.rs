@@ -3,6 +3,7 @@
 //! The physics and solvers (`optics`, `spectral`, `display`, `transport`, `solve`, `encode`, `evaluate`)
 //! are synchronous and know nothing of the service; `service` depends on them, never the reverse.
 
+pub mod bench;
 pub mod bundle;
 pub mod cli;
 pub mod display;
