@@ -35,6 +35,47 @@ pub enum Command {
     Evaluate(EvaluateArgs),
     /// Benchmarks: transport build, sparse kernels, solver, whole encode; figures go to a Markdown file.
     Bench(BenchArgs),
+    /// Experiments: the paper's §7.3, a design-space sweep, the secure preset's evaluation.
+    #[command(subcommand)]
+    Experiment(ExperimentCommand),
+}
+
+/// `eyekey experiment ...`
+#[derive(Subcommand, Debug)]
+pub enum ExperimentCommand {
+    /// Paper §7.3: Fig. 13 baseline, Fig. 14 multiplex and Fig. 15 difference maximisation, with both ablations.
+    Paper {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/paper")]
+        out: PathBuf,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 300)]
+        max_iterations: u32,
+        /// People sampled to check the proposed multiplex encoding (0 skips).
+        #[arg(long, default_value_t = 50)]
+        population: u32,
+    },
+    /// Design-space sweep: target legibility against the fraction of a sampled population that can read.
+    Sweep {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/sweep")]
+        out: PathBuf,
+        /// People sampled per configuration.
+        #[arg(long, default_value_t = 60)]
+        population: u32,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 200)]
+        max_iterations: u32,
+    },
+    /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
+    Secure {
+        /// Output directory (bundle/ and evaluation/).
+        #[arg(long, default_value = "docs/experiments/secure")]
+        out: PathBuf,
+        /// People sampled.
+        #[arg(long, default_value_t = 1000)]
+        population: u32,
+    },
 }
 
 /// Options of `eyekey bench`.
@@ -292,6 +333,15 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
         Command::Bench(a) => bench(&a)?,
+        Command::Experiment(ExperimentCommand::Paper { out, max_iterations, population }) => {
+            print!("{}", crate::experiment::paper(&out, max_iterations, population)?);
+        }
+        Command::Experiment(ExperimentCommand::Sweep { out, population, max_iterations }) => {
+            print!("{}", crate::experiment::sweep(&out, population, max_iterations)?.0);
+        }
+        Command::Experiment(ExperimentCommand::Secure { out, population }) => {
+            print!("{}", crate::experiment::secure(&out, population)?);
+        }
     }
     Ok(())
 }

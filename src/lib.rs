@@ -9,6 +9,7 @@ pub mod cli;
 pub mod display;
 pub mod encode;
 pub mod evaluate;
+pub mod experiment;
 pub mod glyphs;
 pub mod imaging;
 pub mod observer;

@@ -78,11 +78,7 @@ pub fn seal_bundle(dir: &Path) -> io::Result<Vec<BundleFile>> {
     let mut files = Vec::with_capacity(names.len());
     for name in names {
         let (bytes, sha256) = sha256_file(&dir.join(&name))?;
-        files.push(BundleFile {
-            name,
-            bytes,
-            sha256,
-        });
+        files.push(BundleFile { name, bytes, sha256 });
     }
     let part = dir.join(format!("{ZIP_NAME}.part"));
     let mut zip = zip::ZipWriter::new(BufWriter::new(File::create(&part)?));
@@ -96,12 +92,8 @@ pub fn seal_bundle(dir: &Path) -> io::Result<Vec<BundleFile>> {
         let options = zip::write::SimpleFileOptions::default()
             .compression_method(method)
             .large_file(f.bytes >= u32::MAX as u64);
-        zip.start_file(f.name.as_str(), options)
-            .map_err(io::Error::other)?;
-        io::copy(
-            &mut BufReader::new(File::open(dir.join(&f.name))?),
-            &mut zip,
-        )?;
+        zip.start_file(f.name.as_str(), options).map_err(io::Error::other)?;
+        io::copy(&mut BufReader::new(File::open(dir.join(&f.name))?), &mut zip)?;
     }
     let mut inner = zip.finish().map_err(io::Error::other)?;
     inner.flush()?;
@@ -116,12 +108,7 @@ mod tests {
 
     #[test]
     fn only_frames_mask_and_manifest_are_bundle_files() {
-        for ok in [
-            "frame_0.png",
-            "frame_12.png",
-            "barrier_mask.png",
-            "manifest.json",
-        ] {
+        for ok in ["frame_0.png", "frame_12.png", "barrier_mask.png", "manifest.json"] {
             assert!(is_bundle_file(ok), "{ok}");
         }
         for no in [
@@ -134,9 +121,7 @@ mod tests {
         ] {
             assert!(!is_bundle_file(no), "{no}");
         }
-        assert!(
-            !is_plain_file_name("../x") && !is_plain_file_name("a/b") && !is_plain_file_name("..")
-        );
+        assert!(!is_plain_file_name("../x") && !is_plain_file_name("a/b") && !is_plain_file_name(".."));
     }
 
     #[test]
@@ -155,12 +140,7 @@ mod tests {
         let names: Vec<_> = files.iter().map(|f| f.name.as_str()).collect();
         assert_eq!(
             names,
-            [
-                "frame_2.png",
-                "frame_10.png",
-                "barrier_mask.png",
-                "manifest.json"
-            ]
+            ["frame_2.png", "frame_10.png", "barrier_mask.png", "manifest.json"]
         );
         let zip = zip::ZipArchive::new(File::open(dir.path().join(ZIP_NAME)).unwrap()).unwrap();
         assert_eq!(zip.len(), 4);

@@ -2,10 +2,10 @@
 //!
 //! A worker claims a job (see [`crate::service::store::jobs`]), loads and opens its inputs, and runs
 //! [`crate::pipeline::run_job`] on a blocking thread (the pipeline spreads its work over the rayon pool;
-//! tokio's worker threads never solve). Meanwhile the async side renews the lease every third of it,
-//! writes progress, and forwards a cancel request to the solver's flag. Output goes to
-//! `<data>/jobs/.tmp-<job>-<attempt>/` and is renamed to `<data>/jobs/<job>/` only when the bundle and
-//! its zip are complete, so a bundle is never visible half-written.
+//! tokio's worker threads never solve). Meanwhile the async side renews the lease (every third of it,
+//! and at least every 500 ms), writes progress, and forwards a cancel request to the solver's flag.
+//! Output goes to `<data>/jobs/.tmp-<job>-<attempt>/` and is renamed to `<data>/jobs/<job>/` only when
+//! the bundle and its zip are complete, so a bundle is never visible half-written.
 //!
 //! Outcomes: success → `succeeded`; `PipelineError::Invalid` → `failed` at once (retrying cannot help);
 //! any other error or a panic → back to `queued` while attempts remain, else `failed`; a cancel request →
@@ -80,10 +80,7 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<Job
         metrics::counter!("eyekey_jobs_finished_total", "state" => row.state.clone()).increment(1);
         state.publish(&row);
     }
-    let Some(job) =
-        store::jobs::claim_next(&state.db, &state.instance_id, state.config.queue.lease, now)
-            .await?
-    else {
+    let Some(job) = store::jobs::claim_next(&state.db, &state.instance_id, state.config.queue.lease, now).await? else {
         return Ok(None);
     };
     let id = job.id.clone();
@@ -148,13 +145,16 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         move || -> Result<(serde_json::Value, Vec<bundle::BundleFile>), PipelineError> {
             let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
             let output = run_job(&spec, &tmp, &report, &cancel)?;
-            let files = bundle::seal_bundle(&tmp)
-                .map_err(|e| PipelineError::Internal(format!("writing the bundle: {e}")))?;
+            let files =
+                bundle::seal_bundle(&tmp).map_err(|e| PipelineError::Internal(format!("writing the bundle: {e}")))?;
             Ok((output.evaluation, files))
         }
     });
 
-    let mut heartbeat = tokio::time::interval((lease / 3).max(Duration::from_millis(20)));
+    // Each tick renews the lease and records progress: every third of the lease, and at least twice a
+    // second so progress streams stay lively (one small UPDATE per tick).
+    let tick = (lease / 3).clamp(Duration::from_millis(20), Duration::from_millis(500));
+    let mut heartbeat = tokio::time::interval(tick);
     heartbeat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut shutdown = state.shutdown.clone();
     let mut stop = Stop::None;
@@ -216,8 +216,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
             if store::jobs::mark_succeeded(&state.db, &job.id, attempt, &success).await? {
                 metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded")
                     .record(elapsed.as_secs_f64());
-                metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded")
-                    .increment(1);
+                metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded").increment(1);
                 tracing::info!(job = %job.id, attempt, seconds = elapsed.as_secs_f64(), "job succeeded");
                 publish_current(state, &job.id).await;
             } else {
@@ -238,18 +237,11 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         }
         (Ok(Err(PipelineError::Invalid(msg))), _) => {
             discard(tmp).await;
-            end(
-                state,
-                &job,
-                JobState::Failed,
-                Some(&format!("invalid job: {msg}")),
-            )
-            .await?;
+            end(state, &job, JobState::Failed, Some(&format!("invalid job: {msg}"))).await?;
         }
         (Ok(Err(e)), _) => {
             discard(tmp).await;
-            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "error")
-                .record(elapsed.as_secs_f64());
+            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "error").record(elapsed.as_secs_f64());
             retry_or_fail(state, &job, &e.to_string()).await?;
         }
         (Err(join_error), _) => {
@@ -278,12 +270,7 @@ async fn publish_current(state: &AppState, id: &str) {
     }
 }
 
-async fn end(
-    state: &AppState,
-    job: &JobRow,
-    to: JobState,
-    error: Option<&str>,
-) -> anyhow::Result<()> {
+async fn end(state: &AppState, job: &JobRow, to: JobState, error: Option<&str>) -> anyhow::Result<()> {
     if store::jobs::mark_ended(&state.db, &job.id, job.attempts, to, error).await? {
         metrics::counter!("eyekey_jobs_finished_total", "state" => to.as_str()).increment(1);
         tracing::info!(job = %job.id, attempt = job.attempts, state = to.as_str(), error, "job ended");
@@ -305,26 +292,15 @@ async fn retry_or_fail(state: &AppState, job: &JobRow, error: &str) -> anyhow::R
     }
 }
 
-async fn open_profile(
-    state: &AppState,
-    id: &str,
-    version: i64,
-    role: &str,
-) -> Result<VisionProfile, LoadError> {
+async fn open_profile(state: &AppState, id: &str, version: i64, role: &str) -> Result<VisionProfile, LoadError> {
     let row = store::profiles::get_version(&state.db, id, version)
         .await?
-        .ok_or_else(|| {
-            LoadError::Fatal(format!(
-                "the {role} profile {id} (version {version}) was deleted"
-            ))
-        })?;
+        .ok_or_else(|| LoadError::Fatal(format!("the {role} profile {id} (version {version}) was deleted")))?;
     let plain = row
         .open(&state.master_key)
         .map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))?;
-    let text = String::from_utf8(plain)
-        .map_err(|_| LoadError::Fatal(format!("{role} profile {id} is not text")))?;
-    VisionProfile::from_json(&text)
-        .map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))
+    let text = String::from_utf8(plain).map_err(|_| LoadError::Fatal(format!("{role} profile {id} is not text")))?;
+    VisionProfile::from_json(&text).map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))
 }
 
 async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::RgbImage, LoadError> {
@@ -340,14 +316,10 @@ async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::Rgb
     tokio::task::spawn_blocking(move || {
         let format = super::images::format_of_content_type(Some(&doc.content_type))
             .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
-        let header = super::images::inspect(
-            &bytes,
-            format,
-            max_pixels.max((doc.width * doc.height) as u64),
-        )
-        .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
-        let image = super::images::decode(&bytes, &header)
+        let header = super::images::inspect(&bytes, format, max_pixels.max((doc.width * doc.height) as u64))
             .map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
+        let image =
+            super::images::decode(&bytes, &header).map_err(|e| LoadError::Fatal(format!("{role} document: {e}")))?;
         Ok(image.to_rgb8())
     })
     .await
@@ -360,10 +332,10 @@ async fn load_spec(state: &AppState, job: &JobRow) -> Result<JobSpec, LoadError>
         .ok_or_else(|| LoadError::Fatal(format!("the display {} was deleted", job.display_id)))?;
     let geometry: DisplayGeometry = serde_json::from_str(&display.geometry)
         .map_err(|e| LoadError::Fatal(format!("stored display geometry: {e}")))?;
-    let options: EncodeOptions = serde_json::from_str(&job.options)
-        .map_err(|e| LoadError::Fatal(format!("stored options: {e}")))?;
-    let observer_refs: Vec<ObserverRef> = serde_json::from_str(&job.observers)
-        .map_err(|e| LoadError::Fatal(format!("stored observers: {e}")))?;
+    let options: EncodeOptions =
+        serde_json::from_str(&job.options).map_err(|e| LoadError::Fatal(format!("stored options: {e}")))?;
+    let observer_refs: Vec<ObserverRef> =
+        serde_json::from_str(&job.observers).map_err(|e| LoadError::Fatal(format!("stored observers: {e}")))?;
     let target = open_profile(state, &job.profile_id, job.profile_version, "target").await?;
     let mut observers = Vec::with_capacity(observer_refs.len());
     for o in &observer_refs {
