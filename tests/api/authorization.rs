@@ -3,13 +3,7 @@ use serde_json::json;
 
 use crate::helpers::{expect_error, expect_json, spawn_app, OPERATOR_TOKEN};
 
-const OPERATOR_GETS: &[&str] = &[
-    "/v1/profiles",
-    "/v1/displays",
-    "/v1/documents",
-    "/v1/jobs",
-    "/v1/audit",
-];
+const OPERATOR_GETS: &[&str] = &["/v1/profiles", "/v1/displays", "/v1/documents", "/v1/jobs", "/v1/audit"];
 
 #[tokio::test]
 async fn operator_routes_refuse_a_missing_or_wrong_token_with_401() {
@@ -60,16 +54,9 @@ async fn frame_routes_refuse_the_operator_token_and_unknown_tokens() {
     let app = spawn_app().await;
     let r = app.display_get(OPERATOR_TOKEN, "/v1/frames/jobs").await;
     expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
-    let r = app
-        .display_get("ekd_not-a-real-token", "/v1/frames/jobs")
-        .await;
+    let r = app.display_get("ekd_not-a-real-token", "/v1/frames/jobs").await;
     expect_error(r, StatusCode::UNAUTHORIZED, "unauthorized").await;
-    let r = app
-        .client
-        .get(app.url("/v1/frames/jobs"))
-        .send()
-        .await
-        .unwrap();
+    let r = app.client.get(app.url("/v1/frames/jobs")).send().await.unwrap();
     expect_error(r, StatusCode::UNAUTHORIZED, "unauthorized").await;
 }
 
@@ -89,11 +76,7 @@ async fn a_display_sees_its_own_bundle_and_another_display_gets_404() {
     assert_eq!(own["items"].as_array().unwrap().len(), 1);
     assert_eq!(own["items"][0]["id"], job_id.as_str());
 
-    let theirs = expect_json(
-        app.display_get(&other_token, "/v1/frames/jobs").await,
-        StatusCode::OK,
-    )
-    .await;
+    let theirs = expect_json(app.display_get(&other_token, "/v1/frames/jobs").await, StatusCode::OK).await;
     assert!(theirs["items"].as_array().unwrap().is_empty());
     for path in [
         format!("/v1/frames/jobs/{job_id}"),
@@ -124,10 +107,7 @@ async fn a_display_can_fetch_bundle_files_but_never_the_report_or_views() {
         "views%2Ftarget.png",
     ] {
         let r = app
-            .display_get(
-                &f.display_token,
-                &format!("/v1/frames/jobs/{job_id}/files/{name}"),
-            )
+            .display_get(&f.display_token, &format!("/v1/frames/jobs/{job_id}/files/{name}"))
             .await;
         assert_eq!(r.status(), StatusCode::NOT_FOUND, "{name}");
     }
@@ -147,15 +127,9 @@ async fn a_display_can_fetch_bundle_files_but_never_the_report_or_views() {
     )
     .await;
     assert_eq!(report["summary"]["target_psnr_db"], 30.0);
-    let views = expect_json(
-        app.op_get(&format!("/v1/jobs/{job_id}/views")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let views = expect_json(app.op_get(&format!("/v1/jobs/{job_id}/views")).await, StatusCode::OK).await;
     assert_eq!(views["names"], json!(["target.png"]));
-    let r = app
-        .op_get(&format!("/v1/jobs/{job_id}/views/target.png"))
-        .await;
+    let r = app.op_get(&format!("/v1/jobs/{job_id}/views/target.png")).await;
     assert_eq!(r.status(), StatusCode::OK);
     assert_eq!(r.headers()["content-type"], "image/png");
 }
@@ -167,10 +141,7 @@ async fn every_frame_download_is_audited_with_the_display_as_actor() {
     app.create_job(&f).await;
     let job_id = app.complete_with_fake_bundle().await;
     let r = app
-        .display_get(
-            &f.display_token,
-            &format!("/v1/frames/jobs/{job_id}/bundle.zip"),
-        )
+        .display_get(&f.display_token, &format!("/v1/frames/jobs/{job_id}/bundle.zip"))
         .await;
     assert_eq!(r.status(), StatusCode::OK);
     let r = app
@@ -208,12 +179,7 @@ async fn every_frame_download_is_audited_with_the_display_as_actor() {
         "frames.download".into(),
         format!("jobs/{job_id}/files/manifest.json")
     )));
-    for action in [
-        "profile.enrol",
-        "display.register",
-        "document.upload",
-        "job.create",
-    ] {
+    for action in ["profile.enrol", "display.register", "document.upload", "job.create"] {
         assert!(
             entries.iter().any(|e| e.0 == "operator" && e.1 == action),
             "{action} not audited: {entries:?}"

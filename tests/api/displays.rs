@@ -7,10 +7,7 @@ use crate::helpers::{expect_error, expect_json, spawn_app, tiny_display};
 async fn a_display_token_is_shown_once_and_stored_only_as_a_hash() {
     let app = spawn_app().await;
     let r = app
-        .op_post(
-            "/v1/displays",
-            &json!({ "name": "lobby", "preset": "small" }),
-        )
+        .op_post("/v1/displays", &json!({ "name": "lobby", "preset": "small" }))
         .await;
     let created = expect_json(r, StatusCode::CREATED).await;
     let id = created["display"]["id"].as_str().unwrap();
@@ -19,15 +16,8 @@ async fn a_display_token_is_shown_once_and_stored_only_as_a_hash() {
     assert_eq!(created["display"]["frame_width"], 120);
     assert_eq!(created["display"]["bands"], 4);
 
-    let got = expect_json(
-        app.op_get(&format!("/v1/displays/{id}")).await,
-        StatusCode::OK,
-    )
-    .await;
-    assert!(
-        !got.to_string().contains(token),
-        "the token is never shown again"
-    );
+    let got = expect_json(app.op_get(&format!("/v1/displays/{id}")).await, StatusCode::OK).await;
+    assert!(!got.to_string().contains(token), "the token is never shown again");
     let list = expect_json(app.op_get("/v1/displays").await, StatusCode::OK).await;
     assert!(!list.to_string().contains(token));
     let db = std::fs::read(app.data_dir.join("eyekey.db")).unwrap_or_default();
@@ -48,8 +38,7 @@ async fn rotating_a_token_invalidates_the_old_one() {
     let app = spawn_app().await;
     let (id, old) = app.register_display().await;
     let rotated = expect_json(
-        app.op_post(&format!("/v1/displays/{id}/token"), &json!({}))
-            .await,
+        app.op_post(&format!("/v1/displays/{id}/token"), &json!({})).await,
         StatusCode::OK,
     )
     .await;
@@ -61,10 +50,7 @@ async fn rotating_a_token_invalidates_the_old_one() {
         "unauthorized",
     )
     .await;
-    assert_eq!(
-        app.display_get(new, "/v1/frames/jobs").await.status(),
-        StatusCode::OK
-    );
+    assert_eq!(app.display_get(new, "/v1/frames/jobs").await.status(), StatusCode::OK);
 }
 
 #[tokio::test]

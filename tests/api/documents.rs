@@ -1,8 +1,7 @@
 use reqwest::StatusCode;
 
 use crate::helpers::{
-    document_png, expect_error, expect_json, png_claiming, spawn_app, spawn_app_with, TestApp,
-    OPERATOR_TOKEN,
+    document_png, expect_error, expect_json, png_claiming, spawn_app, spawn_app_with, TestApp, OPERATOR_TOKEN,
 };
 
 async fn upload(app: &TestApp, content_type: &str, body: Vec<u8>) -> reqwest::Response {
@@ -20,15 +19,8 @@ async fn upload(app: &TestApp, content_type: &str, body: Vec<u8>) -> reqwest::Re
 async fn a_png_or_jpeg_document_is_stored_with_its_size_and_checksum() {
     let app = spawn_app().await;
     let png = document_png(30, 20);
-    let doc = expect_json(
-        upload(&app, "image/png", png.clone()).await,
-        StatusCode::CREATED,
-    )
-    .await;
-    assert_eq!(
-        (doc["width"].as_i64(), doc["height"].as_i64()),
-        (Some(30), Some(20))
-    );
+    let doc = expect_json(upload(&app, "image/png", png.clone()).await, StatusCode::CREATED).await;
+    assert_eq!((doc["width"].as_i64(), doc["height"].as_i64()), (Some(30), Some(20)));
     assert_eq!(doc["content_type"], "image/png");
     use sha2::Digest as _;
     assert_eq!(doc["sha256"], hex::encode(sha2::Sha256::digest(&png)));
@@ -42,10 +34,7 @@ async fn a_png_or_jpeg_document_is_stored_with_its_size_and_checksum() {
 
     let mut jpeg = Vec::new();
     image::RgbImage::from_pixel(16, 8, image::Rgb([90, 90, 90]))
-        .write_to(
-            &mut std::io::Cursor::new(&mut jpeg),
-            image::ImageFormat::Jpeg,
-        )
+        .write_to(&mut std::io::Cursor::new(&mut jpeg), image::ImageFormat::Jpeg)
         .unwrap();
     let doc = expect_json(upload(&app, "image/jpeg", jpeg).await, StatusCode::CREATED).await;
     assert_eq!(doc["content_type"], "image/jpeg");
@@ -133,13 +122,7 @@ async fn a_png_that_lies_about_its_data_is_refused() {
         "invalid",
     )
     .await;
-    assert!(
-        e["message"]
-            .as_str()
-            .unwrap()
-            .contains("could not be decoded"),
-        "{e}"
-    );
+    assert!(e["message"].as_str().unwrap().contains("could not be decoded"), "{e}");
 }
 
 #[tokio::test]

@@ -34,12 +34,7 @@ async fn the_database_holds_no_profile_coefficient_in_the_clear() {
         "the database runs in WAL mode"
     );
     for (name, bytes) in &files {
-        for needle in [
-            &b"0.123456789"[..],
-            b"0.987654321",
-            b"zernike_um",
-            b"pupil_diameter_mm",
-        ] {
+        for needle in [&b"0.123456789"[..], b"0.987654321", b"zernike_um", b"pupil_diameter_mm"] {
             assert!(
                 !contains(bytes, needle),
                 "{name} holds {:?} in the clear",
@@ -54,11 +49,7 @@ async fn the_database_holds_no_profile_coefficient_in_the_clear() {
         }
     }
     // Yet the operator reads it back.
-    let got = expect_json(
-        app.op_get(&format!("/v1/profiles/{id}")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let got = expect_json(app.op_get(&format!("/v1/profiles/{id}")).await, StatusCode::OK).await;
     assert_eq!(got["profile"]["zernike_um"][8], 0.987654321);
 }
 
@@ -123,20 +114,14 @@ async fn with_no_configuration_secrets_are_generated_into_private_files() {
         .send()
         .await
         .unwrap();
-    assert_eq!(
-        r.status(),
-        StatusCode::OK,
-        "the generated token is the operator token"
-    );
+    assert_eq!(r.status(), StatusCode::OK, "the generated token is the operator token");
     shutdown.shutdown();
     server.await.unwrap().unwrap();
 
     // A restart reuses the same secrets.
     let app = Application::build(config).await.unwrap();
     assert_eq!(
-        std::fs::read_to_string(data.join("operator-token"))
-            .unwrap()
-            .trim(),
+        std::fs::read_to_string(data.join("operator-token")).unwrap().trim(),
         token
     );
     drop(app);
@@ -150,9 +135,6 @@ async fn a_different_master_key_is_refused_at_start() {
     app.stop().await;
     let mut config = crate::helpers::test_config(dir.path());
     config.master_key_hex = Some("11".repeat(32));
-    let e = Application::build(config)
-        .await
-        .err()
-        .expect("a wrong key is refused");
+    let e = Application::build(config).await.err().expect("a wrong key is refused");
     assert!(e.to_string().contains("master key"), "{e}");
 }

@@ -5,12 +5,7 @@ use crate::helpers::{expect_error, spawn_app, spawn_app_with, OPERATOR_TOKEN};
 #[tokio::test]
 async fn unknown_routes_and_wrong_methods_get_the_json_error_shape() {
     let app = spawn_app().await;
-    let r = app
-        .client
-        .get(app.url("/v1/nothing-here"))
-        .send()
-        .await
-        .unwrap();
+    let r = app.client.get(app.url("/v1/nothing-here")).send().await.unwrap();
     expect_error(r, StatusCode::NOT_FOUND, "not_found").await;
     let r = app
         .client
@@ -43,12 +38,7 @@ async fn malformed_json_and_a_missing_content_type_are_client_errors() {
         .send()
         .await
         .unwrap();
-    expect_error(
-        r,
-        StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        "unsupported_media_type",
-    )
-    .await;
+    expect_error(r, StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type").await;
 }
 
 #[tokio::test]

@@ -13,9 +13,7 @@ use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, OPERATO
 async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     let app = spawn_app_with(|c| c.workers = 1).await;
     let f = app.fixtures().await;
-    let observer = app
-        .enrol(&eyekey::optics::profile::VisionProfile::perfect())
-        .await;
+    let observer = app.enrol(&eyekey::optics::profile::VisionProfile::perfect()).await;
     let mut body = job_body(&f);
     body["observer_profile_ids"] = json!([observer]);
     let job = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
@@ -23,11 +21,9 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
 
     // Follow it to the end over server-sent events, and wait for the display's notification too.
     let display_events = app.display_get(&f.display_token, "/v1/frames/events").await;
-    let notified = tokio::spawn(read_events(
-        display_events,
-        Duration::from_secs(120),
-        |name, _| name == "job_succeeded",
-    ));
+    let notified = tokio::spawn(read_events(display_events, Duration::from_secs(120), |name, _| {
+        name == "job_succeeded"
+    }));
     let stream = app
         .client
         .get(app.url(&format!("/v1/jobs/{id}/events")))
@@ -36,10 +32,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         .await
         .unwrap();
     let events = read_events(stream, Duration::from_secs(120), |_, v| {
-        matches!(
-            v["state"].as_str(),
-            Some("succeeded" | "failed" | "cancelled")
-        )
+        matches!(v["state"].as_str(), Some("succeeded" | "failed" | "cancelled"))
     })
     .await;
     let last = &events.last().expect("events arrive").1;
@@ -47,10 +40,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     assert_eq!(last["progress"], 1.0);
     assert!(last["timings"]["solve_seconds"].as_f64().unwrap() > 0.0);
     let note = notified.await.unwrap();
-    assert_eq!(
-        note.last().map(|(_, v)| v["id"].as_str().unwrap()),
-        Some(id.as_str())
-    );
+    assert_eq!(note.last().map(|(_, v)| v["id"].as_str().unwrap()), Some(id.as_str()));
 
     // The display downloads the bundle and checks every file against the listing and the manifest.
     let listing = expect_json(
@@ -70,10 +60,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         "one frame per projector"
     );
     let r = app
-        .display_get(
-            &f.display_token,
-            &format!("/v1/frames/jobs/{id}/bundle.zip"),
-        )
+        .display_get(&f.display_token, &format!("/v1/frames/jobs/{id}/bundle.zip"))
         .await;
     assert_eq!(r.status(), StatusCode::OK);
     assert_eq!(r.headers()["content-type"], "application/zip");
@@ -92,10 +79,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
             "{name}"
         );
         let single = app
-            .display_get(
-                &f.display_token,
-                &format!("/v1/frames/jobs/{id}/files/{name}"),
-            )
+            .display_get(&f.display_token, &format!("/v1/frames/jobs/{id}/files/{name}"))
             .await;
         assert_eq!(
             single.bytes().await.unwrap().as_ref(),
@@ -121,10 +105,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         let frame = image::load_from_memory(&bytes).unwrap();
         let (w, h) = crate::helpers::tiny_display().frame_size();
         assert_eq!((frame.width(), frame.height()), (w, h));
-        assert!(
-            matches!(frame.color(), image::ColorType::L16),
-            "frames are 16-bit grey"
-        );
+        assert!(matches!(frame.color(), image::ColorType::L16), "frames are 16-bit grey");
     }
 
     // The crate's own bundle reader accepts the downloaded zip (it verifies every size and checksum).
@@ -134,32 +115,20 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     assert_eq!(manifest.display, crate::helpers::tiny_display());
 
     // The operator reads the evaluation and the simulated views.
-    let report = expect_json(
-        app.op_get(&format!("/v1/jobs/{id}/evaluation")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let report = expect_json(app.op_get(&format!("/v1/jobs/{id}/evaluation")).await, StatusCode::OK).await;
     assert!(report.is_object());
-    let views = expect_json(
-        app.op_get(&format!("/v1/jobs/{id}/views")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let views = expect_json(app.op_get(&format!("/v1/jobs/{id}/views")).await, StatusCode::OK).await;
     let names = views["names"].as_array().unwrap();
     assert!(!names.is_empty());
     let r = app
-        .op_get(&format!(
-            "/v1/jobs/{id}/views/{}",
-            names[0].as_str().unwrap()
-        ))
+        .op_get(&format!("/v1/jobs/{id}/views/{}", names[0].as_str().unwrap()))
         .await;
     assert_eq!(r.status(), StatusCode::OK);
 
     // The target's view simulated from the downloaded bundle scores as the job's own evaluation says.
     // Same observer as the evaluation (its transport seed: the job's seed + 20000, xor 0xE7A1); the only
     // difference is the frames' 16-bit quantisation.
-    let options: eyekey::pipeline::EncodeOptions =
-        serde_json::from_value(last["options"].clone()).unwrap();
+    let options: eyekey::pipeline::EncodeOptions = serde_json::from_value(last["options"].clone()).unwrap();
     let transport = eyekey::transport::TransportOptions {
         sub_rays: options.sub_rays,
         seed: options.seed.wrapping_add(20_000) ^ 0xE7A1,
@@ -231,8 +200,5 @@ async fn fifty_jobs_submitted_at_once_all_finish() {
         .text()
         .await
         .unwrap();
-    assert!(
-        metrics.contains("eyekey_solve_duration_seconds_bucket"),
-        "{metrics}"
-    );
+    assert!(metrics.contains("eyekey_solve_duration_seconds_bucket"), "{metrics}");
 }

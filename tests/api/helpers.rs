@@ -65,9 +65,7 @@ pub async fn spawn_app_in(data_dir: &Path, configure: impl FnOnce(&mut Config)) 
     init_tracing();
     let mut config = test_config(data_dir);
     configure(&mut config);
-    let app = Application::build(config)
-        .await
-        .expect("the application builds");
+    let app = Application::build(config).await.expect("the application builds");
     let address = format!("http://127.0.0.1:{}", app.port());
     let state = app.state();
     let shutdown = app.shutdown_handle();
@@ -140,21 +138,13 @@ impl TestApp {
     }
 
     pub async fn display_get(&self, token: &str, path: &str) -> Response {
-        self.client
-            .get(self.url(path))
-            .bearer_auth(token)
-            .send()
-            .await
-            .unwrap()
+        self.client.get(self.url(path)).bearer_auth(token).send().await.unwrap()
     }
 
     /// Enrols a profile; returns its id.
     pub async fn enrol(&self, profile: &VisionProfile) -> String {
         let r = self
-            .op_post(
-                "/v1/profiles",
-                &json!({ "label": "test person", "profile": profile }),
-            )
+            .op_post("/v1/profiles", &json!({ "label": "test person", "profile": profile }))
             .await;
         let body = expect_json(r, StatusCode::CREATED).await;
         body["id"].as_str().unwrap().to_string()
@@ -218,10 +208,7 @@ impl TestApp {
         let deadline = tokio::time::Instant::now() + timeout;
         loop {
             let job = self.job(id).await;
-            if matches!(
-                job["state"].as_str(),
-                Some("succeeded" | "failed" | "cancelled")
-            ) {
+            if matches!(job["state"].as_str(), Some("succeeded" | "failed" | "cancelled")) {
                 return job;
             }
             assert!(
@@ -232,29 +219,52 @@ impl TestApp {
         }
     }
 
+    /// Creates a job that takes a few seconds to solve (the 24×24-hole preset and an iteration cap the
+    /// tolerance will not cut short), and waits until a worker runs it. Returns its id.
+    pub async fn start_slow_job(&self) -> String {
+        let mut f = self.fixtures().await;
+        let r = self
+            .op_post("/v1/displays", &json!({ "name": "small", "preset": "small" }))
+            .await;
+        f.display_id = expect_json(r, StatusCode::CREATED).await["display"]["id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        f.document_id = self.upload(document_png(48, 48)).await;
+        let mut body = job_body(&f);
+        body["options"]["max_iterations"] = json!(3000);
+        body["options"]["tolerance"] = json!(1e-12);
+        let r = self.op_post("/v1/jobs", &body).await;
+        let id = expect_json(r, StatusCode::CREATED).await["id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+        loop {
+            let job = self.job(&id).await;
+            if job["state"] == "running" {
+                return id;
+            }
+            assert_eq!(job["state"], "queued", "{job}");
+            assert!(tokio::time::Instant::now() < deadline, "the job never started");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
     /// Claims the next job directly and completes it with a hand-made bundle (frames, mask, manifest,
     /// report and a view), as a worker would after a successful solve. Returns the job id.
     pub async fn complete_with_fake_bundle(&self) -> String {
-        let job = store::jobs::claim_next(
-            &self.state.db,
-            "test-worker",
-            Duration::from_secs(30),
-            store::now_ms(),
-        )
-        .await
-        .unwrap()
-        .expect("a queued job");
+        let job = store::jobs::claim_next(&self.state.db, "test-worker", Duration::from_secs(30), store::now_ms())
+            .await
+            .unwrap()
+            .expect("a queued job");
         let dir = self.data_dir.join("jobs").join(&job.id);
         std::fs::create_dir_all(dir.join("views")).unwrap();
         for name in ["frame_0.png", "frame_1.png", "barrier_mask.png"] {
             std::fs::write(dir.join(name), document_png(4, 4)).unwrap();
         }
         std::fs::write(dir.join("manifest.json"), br#"{"files": []}"#).unwrap();
-        std::fs::write(
-            dir.join("report.json"),
-            br#"{"summary": {"target_psnr_db": 30.0}}"#,
-        )
-        .unwrap();
+        std::fs::write(dir.join("report.json"), br#"{"summary": {"target_psnr_db": 30.0}}"#).unwrap();
         std::fs::write(dir.join("views").join("target.png"), document_png(4, 4)).unwrap();
         let files = bundle::seal_bundle(&dir).unwrap();
         let ok = store::jobs::mark_succeeded(
@@ -363,11 +373,7 @@ pub fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     ihdr.extend_from_slice(&h.to_be_bytes());
     ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8-bit RGB, deflate, no filter, no interlace
     chunk(&mut out, b"IHDR", &ihdr);
-    chunk(
-        &mut out,
-        b"IDAT",
-        &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
-    );
+    chunk(&mut out, b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
     chunk(&mut out, b"IEND", &[]);
     out
 }
@@ -385,10 +391,7 @@ pub async fn expect_error(r: Response, status: StatusCode, code: &str) -> Value 
     let body = expect_json(r, status).await;
     let error = &body["error"];
     assert_eq!(error["code"], code, "{body}");
-    assert!(
-        error["message"].as_str().is_some_and(|m| !m.is_empty()),
-        "{body}"
-    );
+    assert!(error["message"].as_str().is_some_and(|m| !m.is_empty()), "{body}");
     assert!(
         error.get("field").is_some(),
         "the error shape always has `field`: {body}"

@@ -41,16 +41,9 @@ async fn the_same_idempotency_key_and_body_return_the_same_job() {
         "idempotency_key_reused",
     )
     .await;
-    assert!(e["message"]
-        .as_str()
-        .unwrap()
-        .contains(first["id"].as_str().unwrap()));
+    assert!(e["message"].as_str().unwrap().contains(first["id"].as_str().unwrap()));
 
-    let other = expect_json(
-        send(different, "order-2").await.unwrap(),
-        StatusCode::CREATED,
-    )
-    .await;
+    let other = expect_json(send(different, "order-2").await.unwrap(), StatusCode::CREATED).await;
     assert_ne!(other["id"], first["id"]);
     let list = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;
     assert_eq!(list["items"].as_array().unwrap().len(), 2);
@@ -89,12 +82,7 @@ async fn a_job_referring_to_missing_resources_or_with_bad_options_is_refused_nam
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let missing = "00000000-0000-4000-8000-000000000000";
-    for field in [
-        "display_id",
-        "document_id",
-        "profile_id",
-        "decoy_document_id",
-    ] {
+    for field in ["display_id", "document_id", "profile_id", "decoy_document_id"] {
         let mut body = job_body(&f);
         body[field] = json!(missing);
         let e = expect_error(
@@ -160,10 +148,7 @@ async fn a_job_keeps_the_profile_version_it_was_created_with() {
         )
         .await;
     expect_json(r, StatusCode::OK).await;
-    assert_eq!(
-        app.job(job["id"].as_str().unwrap()).await["profile_version"],
-        1
-    );
+    assert_eq!(app.job(job["id"].as_str().unwrap()).await["profile_version"], 1);
     assert_eq!(app.create_job(&f).await["profile_version"], 2);
 }
 
@@ -172,23 +157,15 @@ async fn cancelling_a_queued_job_cancels_it_at_once() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    let r = app
-        .op_post(&format!("/v1/jobs/{id}/cancel"), &json!({}))
-        .await;
+    let r = app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
     let job = expect_json(r, StatusCode::OK).await;
     assert_eq!(job["state"], "cancelled");
     assert!(job["timings"]["finished_at"].is_string());
     // Nothing left to run.
-    assert_eq!(
-        eyekey::service::try_execute_next_job(&app.state)
-            .await
-            .unwrap(),
-        None
-    );
+    assert_eq!(eyekey::service::try_execute_next_job(&app.state).await.unwrap(), None);
     // Cancelling again is harmless.
     expect_json(
-        app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({}))
-            .await,
+        app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await,
         StatusCode::OK,
     )
     .await;
@@ -199,18 +176,11 @@ async fn cancelling_a_running_job_stops_it_and_it_ends_cancelled() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    let claimed = store::jobs::claim_next(
-        &app.state.db,
-        "test-worker",
-        Duration::from_secs(30),
-        store::now_ms(),
-    )
-    .await
-    .unwrap()
-    .unwrap();
-    let r = app
-        .op_post(&format!("/v1/jobs/{id}/cancel"), &json!({}))
-        .await;
+    let claimed = store::jobs::claim_next(&app.state.db, "test-worker", Duration::from_secs(30), store::now_ms())
+        .await
+        .unwrap()
+        .unwrap();
+    let r = app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
     let job = expect_json(r, StatusCode::ACCEPTED).await;
     assert_eq!(
         (job["state"].as_str(), job["cancel_requested"].as_bool()),
@@ -223,10 +193,7 @@ async fn cancelling_a_running_job_stops_it_and_it_ends_cancelled() {
     let job = app.job(&id).await;
     assert_eq!(job["state"], "cancelled");
     assert!(
-        std::fs::read_dir(app.data_dir.join("jobs"))
-            .unwrap()
-            .next()
-            .is_none(),
+        std::fs::read_dir(app.data_dir.join("jobs")).unwrap().next().is_none(),
         "no output is left behind"
     );
 }
@@ -238,8 +205,7 @@ async fn a_finished_job_cannot_be_cancelled() {
     app.create_job(&f).await;
     let id = app.complete_with_fake_bundle().await;
     let e = expect_error(
-        app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({}))
-            .await,
+        app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await,
         StatusCode::CONFLICT,
         "job_finished",
     )
@@ -263,8 +229,7 @@ async fn jobs_are_listed_with_state_and_display_filters() {
         .as_str()
         .unwrap()
         .to_string();
-    app.op_post(&format!("/v1/jobs/{a}/cancel"), &json!({}))
-        .await;
+    app.op_post(&format!("/v1/jobs/{a}/cancel"), &json!({})).await;
 
     let ids = |v: serde_json::Value| -> Vec<String> {
         v["items"]
@@ -277,12 +242,10 @@ async fn jobs_are_listed_with_state_and_display_filters() {
     let queued = ids(expect_json(app.op_get("/v1/jobs?state=queued").await, StatusCode::OK).await);
     assert_eq!(queued.len(), 2);
     assert!(queued.contains(&b) && queued.contains(&c));
-    let cancelled =
-        ids(expect_json(app.op_get("/v1/jobs?state=cancelled").await, StatusCode::OK).await);
+    let cancelled = ids(expect_json(app.op_get("/v1/jobs?state=cancelled").await, StatusCode::OK).await);
     assert_eq!(cancelled, vec![a.clone()]);
     let for_other = ids(expect_json(
-        app.op_get(&format!("/v1/jobs?display_id={other_display}"))
-            .await,
+        app.op_get(&format!("/v1/jobs?display_id={other_display}")).await,
         StatusCode::OK,
     )
     .await);
@@ -328,8 +291,7 @@ async fn the_event_stream_sends_the_job_then_each_change_and_ends_when_it_ends()
         v["state"] == "cancelled"
     }));
     tokio::time::sleep(Duration::from_millis(200)).await;
-    app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({}))
-        .await;
+    app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
     let events = reader.await.unwrap();
     let states: Vec<_> = events
         .iter()
@@ -343,9 +305,25 @@ async fn a_deleted_profile_cancels_its_queued_jobs() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    app.op_delete(&format!("/v1/profiles/{}", f.profile_id))
-        .await;
+    app.op_delete(&format!("/v1/profiles/{}", f.profile_id)).await;
     let job = app.job(&id).await;
     assert_eq!(job["state"], "cancelled");
     assert!(job["last_error"].as_str().unwrap().contains("deleted"));
+}
+
+/// Runs the real encoder: the cancel request reaches the solver between iterations.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cancelling_a_job_while_the_solver_runs_stops_it_within_moments() {
+    let app = crate::helpers::spawn_app_with(|c| c.workers = 1).await;
+    let id = app.start_slow_job().await;
+    let r = app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
+    let job = expect_json(r, StatusCode::ACCEPTED).await;
+    assert_eq!(job["cancel_requested"], true);
+    let asked = std::time::Instant::now();
+    let job = app.wait_for_terminal(&id, Duration::from_secs(30)).await;
+    assert_eq!(job["state"], "cancelled", "{job}");
+    assert!(asked.elapsed() < Duration::from_secs(10), "took {:?}", asked.elapsed());
+    assert!(job["bundle_files"].is_null());
+    let leftovers: Vec<_> = std::fs::read_dir(app.data_dir.join("jobs")).unwrap().collect();
+    assert!(leftovers.is_empty(), "a cancelled job leaves no output");
 }

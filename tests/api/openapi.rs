@@ -38,14 +38,8 @@ fn every_operation_is_documented_with_a_summary_and_error_responses() {
                 "{method} {path} has no summary"
             );
             if path.starts_with("/v1/") {
-                assert!(
-                    op["responses"].get("401").is_some(),
-                    "{method} {path} documents no 401"
-                );
-                assert!(
-                    op["security"].is_array(),
-                    "{method} {path} names no security scheme"
-                );
+                assert!(op["responses"].get("401").is_some(), "{method} {path} documents no 401");
+                assert!(op["security"].is_array(), "{method} {path} names no security scheme");
             }
         }
     }

@@ -11,11 +11,7 @@ async fn health_and_readiness_answer_without_a_token() {
     )
     .await;
     assert_eq!(health["status"], "ok");
-    let ready = expect_json(
-        app.client.get(app.url("/readyz")).send().await.unwrap(),
-        StatusCode::OK,
-    )
-    .await;
+    let ready = expect_json(app.client.get(app.url("/readyz")).send().await.unwrap(), StatusCode::OK).await;
     assert_eq!(ready["status"], "ready");
 }
 
@@ -36,10 +32,7 @@ async fn metrics_report_jobs_by_state_queue_depth_and_http_latency_by_route() {
         .unwrap();
     assert!(text.contains("eyekey_queue_depth"), "{text}");
     assert!(text.contains("eyekey_jobs{state=\"queued\"}"), "{text}");
-    assert!(
-        text.contains("eyekey_http_request_duration_seconds_bucket"),
-        "{text}"
-    );
+    assert!(text.contains("eyekey_http_request_duration_seconds_bucket"), "{text}");
     assert!(
         text.contains("route=\"/v1/jobs\""),
         "latency is labelled by route template: {text}"
@@ -55,9 +48,7 @@ async fn the_audit_log_cannot_be_changed() {
         .execute(&app.state.db)
         .await;
     assert!(update.unwrap_err().to_string().contains("append-only"));
-    let delete = sqlx::query("DELETE FROM audit_log")
-        .execute(&app.state.db)
-        .await;
+    let delete = sqlx::query("DELETE FROM audit_log").execute(&app.state.db).await;
     assert!(delete.is_err());
 }
 

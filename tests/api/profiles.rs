@@ -8,20 +8,13 @@ use eyekey::optics::profile::VisionProfile;
 async fn a_profile_can_be_enrolled_read_listed_reenrolled_and_deleted() {
     let app = spawn_app().await;
     let r = app
-        .op_post(
-            "/v1/profiles",
-            &json!({ "label": "Ada", "profile": myope() }),
-        )
+        .op_post("/v1/profiles", &json!({ "label": "Ada", "profile": myope() }))
         .await;
     let created = expect_json(r, StatusCode::CREATED).await;
     let id = created["id"].as_str().unwrap().to_string();
     assert_eq!(created["version"], 1);
 
-    let got = expect_json(
-        app.op_get(&format!("/v1/profiles/{id}")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let got = expect_json(app.op_get(&format!("/v1/profiles/{id}")).await, StatusCode::OK).await;
     assert_eq!(got["label"], "Ada");
     let profile: VisionProfile = serde_json::from_value(got["profile"].clone()).unwrap();
     assert_eq!(profile, myope());
@@ -41,21 +34,14 @@ async fn a_profile_can_be_enrolled_read_listed_reenrolled_and_deleted() {
     let v2 = expect_json(r, StatusCode::OK).await;
     assert_eq!(v2["version"], 2);
     assert_eq!(v2["label"], "Ada", "omitting the label keeps it");
-    let got = expect_json(
-        app.op_get(&format!("/v1/profiles/{id}")).await,
-        StatusCode::OK,
-    )
-    .await;
+    let got = expect_json(app.op_get(&format!("/v1/profiles/{id}")).await, StatusCode::OK).await;
     assert_eq!(got["profile"]["zernike_um"][4], -0.5);
     let old = expect_json(
         app.op_get(&format!("/v1/profiles/{id}?version=1")).await,
         StatusCode::OK,
     )
     .await;
-    assert_eq!(
-        old["profile"]["zernike_um"][4], 1.25,
-        "earlier versions are kept"
-    );
+    assert_eq!(old["profile"]["zernike_um"][4], 1.25, "earlier versions are kept");
 
     let r = app.op_delete(&format!("/v1/profiles/{id}")).await;
     assert_eq!(r.status(), StatusCode::NO_CONTENT);
@@ -73,16 +59,12 @@ async fn a_profile_can_be_enrolled_read_listed_reenrolled_and_deleted() {
     .await;
     let list = expect_json(app.op_get("/v1/profiles").await, StatusCode::OK).await;
     assert!(list["items"].as_array().unwrap().is_empty());
-    let versions: (i64,) =
-        sqlx::query_as("SELECT COUNT(*) FROM profile_versions WHERE profile_id = ?")
-            .bind(&id)
-            .fetch_one(&app.state.db)
-            .await
-            .unwrap();
-    assert_eq!(
-        versions.0, 0,
-        "deleting a profile erases its sealed versions"
-    );
+    let versions: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM profile_versions WHERE profile_id = ?")
+        .bind(&id)
+        .fetch_one(&app.state.db)
+        .await
+        .unwrap();
+    assert_eq!(versions.0, 0, "deleting a profile erases its sealed versions");
 }
 
 #[tokio::test]

@@ -97,11 +97,7 @@ async fn concurrent_claims_never_take_the_same_job_twice() {
                 .unwrap()
         }
     });
-    let claimed: Vec<_> = futures::future::join_all(claims)
-        .await
-        .into_iter()
-        .flatten()
-        .collect();
+    let claimed: Vec<_> = futures::future::join_all(claims).await.into_iter().flatten().collect();
     let ids: HashSet<_> = claimed.iter().map(|j| j.id.clone()).collect();
     assert_eq!((claimed.len(), ids.len()), (3, 3));
 }
@@ -138,20 +134,14 @@ async fn a_job_whose_inputs_were_deleted_fails_without_retrying() {
         .unwrap()
         .to_string();
     app.op_delete(&format!("/v1/profiles/{observer}")).await;
-    assert_eq!(
-        try_execute_next_job(&app.state).await.unwrap(),
-        Some(id.clone())
-    );
+    assert_eq!(try_execute_next_job(&app.state).await.unwrap(), Some(id.clone()));
     let job = app.job(&id).await;
     assert_eq!(
         (job["state"].as_str(), job["attempts"].as_i64()),
         (Some("failed"), Some(1))
     );
     assert!(
-        job["last_error"]
-            .as_str()
-            .unwrap()
-            .contains("observer profile"),
+        job["last_error"].as_str().unwrap().contains("observer profile"),
         "{job}"
     );
 }

@@ -1,9 +1,8 @@
 use std::time::Duration;
 
 use reqwest::StatusCode;
-use serde_json::json;
 
-use crate::helpers::{expect_json, job_body, spawn_app_in};
+use crate::helpers::{expect_json, spawn_app_in};
 
 #[tokio::test]
 async fn everything_survives_a_restart_on_the_same_data_directory() {
@@ -24,9 +23,7 @@ async fn everything_survives_a_restart_on_the_same_data_directory() {
         "the master key file is reused"
     );
     assert_eq!(
-        app.display_get(&f.display_token, "/v1/frames/jobs")
-            .await
-            .status(),
+        app.display_get(&f.display_token, "/v1/frames/jobs").await.status(),
         StatusCode::OK
     );
     let again = app.job(job["id"].as_str().unwrap()).await;
@@ -40,40 +37,7 @@ async fn everything_survives_a_restart_on_the_same_data_directory() {
 async fn a_job_running_at_shutdown_completes_exactly_once_after_restart() {
     let dir = tempfile::tempdir().unwrap();
     let app = spawn_app_in(dir.path(), |c| c.workers = 1).await;
-    let mut f = app.fixtures().await;
-    // Enough work that the job is still running when the server stops: the 24×24-hole preset and an
-    // iteration cap the tolerance will not cut short.
-    let r = app
-        .op_post(
-            "/v1/displays",
-            &json!({ "name": "small", "preset": "small" }),
-        )
-        .await;
-    f.display_id = expect_json(r, StatusCode::CREATED).await["display"]["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    f.document_id = app.upload(crate::helpers::document_png(48, 48)).await;
-    let mut body = job_body(&f);
-    body["options"]["max_iterations"] = json!(3000);
-    body["options"]["tolerance"] = json!(1e-12);
-    let id = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    loop {
-        let job = app.job(&id).await;
-        if job["state"] == "running" {
-            break;
-        }
-        assert_eq!(job["state"], "queued", "{job}");
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "the job never started"
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    let id = app.start_slow_job().await;
     app.stop().await;
 
     // On shutdown the running job was cancelled and put back in the queue, its attempt not counted.
