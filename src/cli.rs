@@ -38,6 +38,8 @@ pub enum Command {
     /// Experiments: the paper's §7.3, a design-space sweep, the secure preset's evaluation.
     #[command(subcommand)]
     Experiment(ExperimentCommand),
+    /// Run the REST service (embedded SQLite, durable job queue, frame bundles for registered displays).
+    Serve(crate::service::ServeArgs),
 }
 
 /// `eyekey experiment ...`
@@ -75,6 +77,19 @@ pub enum ExperimentCommand {
         /// People sampled.
         #[arg(long, default_value_t = 1000)]
         population: u32,
+    },
+    /// Simulated views with known text and their legibility, for calibrating the threshold against OCR
+    /// (`benches/calibrate_ocr.sh`).
+    Calibrate {
+        /// Output directory (view_<k>.png and views.csv).
+        #[arg(long, default_value = "target/calibration")]
+        out: PathBuf,
+        /// Number of views.
+        #[arg(long, default_value_t = 400)]
+        count: usize,
+        /// Seed of the PINs, people and encodings.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
 }
 
@@ -333,6 +348,11 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
         Command::Bench(a) => bench(&a)?,
+        Command::Serve(args) => {
+            init_tracing();
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(crate::service::serve(args))?;
+        }
         Command::Experiment(ExperimentCommand::Paper { out, max_iterations, population }) => {
             print!("{}", crate::experiment::paper(&out, max_iterations, population)?);
         }
@@ -341,6 +361,10 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::experiment::secure(&out, population)?);
+        }
+        Command::Experiment(ExperimentCommand::Calibrate { out, count, seed }) => {
+            crate::calibration::calibration_views(&out, count, seed)?;
+            println!("wrote {count} views and views.csv to {}", out.display());
         }
     }
     Ok(())
@@ -625,4 +649,16 @@ fn bench(a: &BenchArgs) -> Result<()> {
         write_section(&a.out, "encode", &body)?;
     }
     Ok(())
+}
+
+/// Structured logs on stderr; `RUST_LOG` filters (default `info`), `EYEKEY_LOG_FORMAT=json` for JSON lines.
+fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let _ = if std::env::var("EYEKEY_LOG_FORMAT").as_deref() == Ok("json") {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
 }
