@@ -35,6 +35,7 @@ pub struct Application {
     router: Router,
     state: AppState,
     shutdown: ShutdownHandle,
+    operator_token_file: Option<PathBuf>,
 }
 
 /// Starts a graceful shutdown of an [`Application`] from elsewhere (signals do it too).
@@ -59,32 +60,28 @@ impl Application {
         }
         restrict_dir(&data_dir);
 
-        let operator_token = match &config.operator_token {
-            Some(t) => t.clone(),
-            None => read_or_create_secret(
-                &data_dir.join(OPERATOR_TOKEN_FILE),
-                "operator token",
-                || generate_token("eko_"),
-            )?,
+        let (operator_token, operator_token_file) = match &config.operator_token {
+            Some(t) => (t.clone(), None),
+            None => {
+                let path = data_dir.join(OPERATOR_TOKEN_FILE);
+                let token = read_or_create_secret(&path, "operator token", || generate_token("eko_"))?;
+                (token, Some(path))
+            }
         };
         let master_key_text = match &config.master_key_hex {
             Some(k) => k.clone(),
-            None => read_or_create_secret(
-                &data_dir.join(MASTER_KEY_FILE),
-                "master key",
-                MasterKey::generate_hex,
-            )?,
+            None => read_or_create_secret(&data_dir.join(MASTER_KEY_FILE), "master key", MasterKey::generate_hex)?,
         };
         let master_key = MasterKey::from_hex(&master_key_text).context("EYEKEY_MASTER_KEY")?;
 
         let db = store::connect(&config.database_path())
             .await
             .with_context(|| format!("opening {}", config.database_path().display()))?;
-        store::migrate(&db)
-            .await
-            .context("applying database migrations")?;
+        store::migrate(&db).await.context("applying database migrations")?;
         store::check_master_key(&db, &master_key).await?;
         tracing::info!(database = %config.database_path().display(), "database ready");
+
+        crate::transport::TransportCache::global().set_capacity_bytes(config.transport_cache_bytes);
 
         let listener = TcpListener::bind(config.bind)
             .await
@@ -107,6 +104,7 @@ impl Application {
             router,
             state,
             shutdown: ShutdownHandle(Arc::new(shutdown_tx)),
+            operator_token_file,
         })
     }
 
@@ -125,6 +123,11 @@ impl Application {
         self.state.clone()
     }
 
+    /// The file the operator token was read from or generated into; `None` when it was configured.
+    pub fn operator_token_file(&self) -> Option<&Path> {
+        self.operator_token_file.as_deref()
+    }
+
     /// A handle that stops the service.
     pub fn shutdown_handle(&self) -> ShutdownHandle {
         self.shutdown.clone()
@@ -141,6 +144,7 @@ impl Application {
             router,
             state,
             shutdown,
+            ..
         } = self;
         tracing::info!(address = %listener.local_addr()?, workers = state.config.workers, "eyekey serving");
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
@@ -161,10 +165,7 @@ impl Application {
 
         shutdown.shutdown();
         let grace = state.config.queue.shutdown_grace;
-        let drained = tokio::time::timeout(grace, async {
-            while workers.join_next().await.is_some() {}
-        })
-        .await;
+        let drained = tokio::time::timeout(grace, async { while workers.join_next().await.is_some() {} }).await;
         if drained.is_err() {
             tracing::warn!(
                 ?grace,
@@ -220,11 +221,7 @@ async fn wait_for_signal() {
 }
 
 /// Reads a secret file, or creates it (mode 0600) with a generated value. Logs the path, never the value.
-fn read_or_create_secret(
-    path: &Path,
-    what: &str,
-    generate: impl FnOnce() -> String,
-) -> anyhow::Result<String> {
+fn read_or_create_secret(path: &Path, what: &str, generate: impl FnOnce() -> String) -> anyhow::Result<String> {
     match std::fs::read_to_string(path) {
         Ok(text) => {
             warn_if_readable_by_others(path);
@@ -282,9 +279,4 @@ fn restrict_dir(dir: &Path) {
     }
     #[cfg(not(unix))]
     let _ = dir;
-}
-
-/// The path of the generated operator token file in a data directory.
-pub fn operator_token_path(data_dir: &Path) -> PathBuf {
-    data_dir.join(OPERATOR_TOKEN_FILE)
 }

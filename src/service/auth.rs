@@ -40,10 +40,7 @@ fn bearer(parts: &Parts) -> Option<&str> {
         .filter(|t| !t.is_empty())
 }
 
-async fn display_for(
-    state: &AppState,
-    hash: &[u8; 32],
-) -> Result<Option<store::displays::DisplayRow>, ApiError> {
+async fn display_for(state: &AppState, hash: &[u8; 32]) -> Result<Option<store::displays::DisplayRow>, ApiError> {
     let row = store::displays::by_token_hash(&state.db, hash).await?;
     // The lookup is by an indexed hash; compare again in constant time so the decision itself never
     // depends on how many bytes matched.

@@ -48,6 +48,9 @@ pub struct ServeArgs {
     /// On shutdown, how long running jobs get to stop and be re-queued, seconds.
     #[arg(long, env = "EYEKEY_SHUTDOWN_GRACE_SECS", default_value_t = 20)]
     pub shutdown_grace_secs: u64,
+    /// Memory bound of the transport-operator cache shared by all jobs, MiB (0 disables it).
+    #[arg(long, env = "EYEKEY_TRANSPORT_CACHE_MB", default_value_t = 512)]
+    pub transport_cache_mb: usize,
 }
 
 /// Everything the service needs to start.
@@ -67,6 +70,8 @@ pub struct Config {
     pub limits: Limits,
     /// Queue behaviour.
     pub queue: QueueConfig,
+    /// Memory bound of the process-wide transport-operator cache, bytes.
+    pub transport_cache_bytes: usize,
 }
 
 /// Request and upload limits.
@@ -128,6 +133,7 @@ impl Config {
             workers: 1,
             limits: Limits::default(),
             queue: QueueConfig::default(),
+            transport_cache_bytes: 512 << 20,
         }
     }
 
@@ -157,6 +163,7 @@ impl From<ServeArgs> for Config {
                 shutdown_grace: Duration::from_secs(a.shutdown_grace_secs),
                 ..QueueConfig::default()
             },
+            transport_cache_bytes: a.transport_cache_mb.saturating_mul(1 << 20),
         }
     }
 }

@@ -70,13 +70,7 @@ impl MasterKey {
         let mut nonce = [0u8; NONCE_LEN];
         rand::rngs::OsRng.fill_bytes(&mut nonce);
         let ciphertext = ChaCha20Poly1305::new(&self.0)
-            .encrypt(
-                Nonce::from_slice(&nonce),
-                Payload {
-                    msg: plaintext,
-                    aad,
-                },
-            )
+            .encrypt(Nonce::from_slice(&nonce), Payload { msg: plaintext, aad })
             .map_err(|_| CryptoError::Seal)?;
         Ok(Sealed {
             nonce: nonce.to_vec(),
@@ -85,23 +79,12 @@ impl MasterKey {
     }
 
     /// Opens a value sealed with the same key and `aad`.
-    pub fn open(
-        &self,
-        nonce: &[u8],
-        ciphertext: &[u8],
-        aad: &[u8],
-    ) -> Result<Vec<u8>, CryptoError> {
+    pub fn open(&self, nonce: &[u8], ciphertext: &[u8], aad: &[u8]) -> Result<Vec<u8>, CryptoError> {
         if nonce.len() != NONCE_LEN {
             return Err(CryptoError::Open);
         }
         ChaCha20Poly1305::new(&self.0)
-            .decrypt(
-                Nonce::from_slice(nonce),
-                Payload {
-                    msg: ciphertext,
-                    aad,
-                },
-            )
+            .decrypt(Nonce::from_slice(nonce), Payload { msg: ciphertext, aad })
             .map_err(|_| CryptoError::Open)
     }
 }
@@ -138,9 +121,7 @@ mod tests {
     #[test]
     fn sealed_profile_opens_only_with_its_own_id_and_version() {
         let key = MasterKey::from_hex(&MasterKey::generate_hex()).unwrap();
-        let sealed = key
-            .seal(b"{\"zernike_um\":[0.1]}", &profile_aad("p1", 1))
-            .unwrap();
+        let sealed = key.seal(b"{\"zernike_um\":[0.1]}", &profile_aad("p1", 1)).unwrap();
         assert_eq!(
             key.open(&sealed.nonce, &sealed.ciphertext, &profile_aad("p1", 1))
                 .unwrap(),

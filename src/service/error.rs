@@ -179,28 +179,22 @@ impl From<JsonRejection> for ApiError {
         match r {
             JsonRejection::JsonDataError(e) => {
                 let text = e.body_text();
-                let detail = text
-                    .strip_prefix(DESERIALIZE_PREFIX)
-                    .unwrap_or(&text)
-                    .to_string();
+                let detail = text.strip_prefix(DESERIALIZE_PREFIX).unwrap_or(&text).to_string();
                 // `profile.pupil_diameter_mm: invalid type ...` names the field; a bare message does not.
                 let field = detail
                     .split_once(": ")
                     .map(|(path, _)| path)
                     .filter(|p| !p.is_empty() && !p.contains(' ') && *p != ".")
                     .map(str::to_string);
-                Self::Invalid {
-                    field,
-                    message: detail,
-                }
+                Self::Invalid { field, message: detail }
             }
             JsonRejection::JsonSyntaxError(e) => Self::BadRequest {
                 code: "malformed_json",
                 message: e.body_text(),
             },
-            JsonRejection::MissingJsonContentType(_) => Self::UnsupportedMediaType(
-                "send the body as JSON with Content-Type: application/json".into(),
-            ),
+            JsonRejection::MissingJsonContentType(_) => {
+                Self::UnsupportedMediaType("send the body as JSON with Content-Type: application/json".into())
+            }
             JsonRejection::BytesRejection(e) => bytes_rejection(e),
             other => Self::BadRequest {
                 code: "bad_request",

@@ -100,12 +100,7 @@ fn format_name(format: ImageFormat) -> &'static str {
 /// Parses a `Content-Type` value into PNG or JPEG.
 pub fn format_of_content_type(content_type: Option<&str>) -> Result<ImageFormat, ImageProblem> {
     let raw = content_type.unwrap_or("");
-    let mime = raw
-        .split(';')
-        .next()
-        .unwrap_or("")
-        .trim()
-        .to_ascii_lowercase();
+    let mime = raw.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
     match mime.as_str() {
         "image/png" => Ok(ImageFormat::Png),
         "image/jpeg" | "image/jpg" => Ok(ImageFormat::Jpeg),
@@ -114,11 +109,7 @@ pub fn format_of_content_type(content_type: Option<&str>) -> Result<ImageFormat,
 }
 
 /// Checks the bytes against the declared format and reads the header, refusing more than `max_pixels`.
-pub fn inspect(
-    bytes: &[u8],
-    format: ImageFormat,
-    max_pixels: u64,
-) -> Result<ImageHeader, ImageProblem> {
+pub fn inspect(bytes: &[u8], format: ImageFormat, max_pixels: u64) -> Result<ImageHeader, ImageProblem> {
     let name = format_name(format);
     if image::guess_format(bytes).ok() != Some(format) {
         return Err(ImageProblem::WrongType { declared: name });
@@ -141,11 +132,7 @@ pub fn inspect(
             limit: max_pixels,
         });
     }
-    Ok(ImageHeader {
-        format,
-        width,
-        height,
-    })
+    Ok(ImageHeader { format, width, height })
 }
 
 /// Decodes an image whose header passed [`inspect`], allocating no more than that header allows.
@@ -172,8 +159,7 @@ mod tests {
     fn png(w: u32, h: u32) -> Vec<u8> {
         let img = image::RgbImage::from_pixel(w, h, image::Rgb([200, 10, 10]));
         let mut out = Vec::new();
-        img.write_to(&mut Cursor::new(&mut out), ImageFormat::Png)
-            .unwrap();
+        img.write_to(&mut Cursor::new(&mut out), ImageFormat::Png).unwrap();
         out
     }
 
@@ -188,10 +174,7 @@ mod tests {
     #[test]
     fn too_many_pixels_are_refused_before_decoding() {
         let e = inspect(&png(20, 20), ImageFormat::Png, 399).unwrap_err();
-        assert!(
-            matches!(e, ImageProblem::TooManyPixels { pixels: 400, .. }),
-            "{e}"
-        );
+        assert!(matches!(e, ImageProblem::TooManyPixels { pixels: 400, .. }), "{e}");
     }
 
     #[test]
@@ -209,9 +192,6 @@ mod tests {
             Err(ImageProblem::BadHeader { .. })
         ));
         assert!(format_of_content_type(Some("text/plain")).is_err());
-        assert_eq!(
-            format_of_content_type(Some("image/PNG; q=1")),
-            Ok(ImageFormat::Png)
-        );
+        assert_eq!(format_of_content_type(Some("image/PNG; q=1")), Ok(ImageFormat::Png));
     }
 }

@@ -29,5 +29,10 @@ pub use state::AppState;
 /// Runs `eyekey serve` until SIGINT or SIGTERM.
 pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let app = Application::build(Config::from(args)).await?;
+    // Said on stderr as well as in the log, so it is seen even without a log subscriber.
+    eprintln!("eyekey serving on http://{} (API docs at /docs)", app.local_addr());
+    if let Some(path) = app.operator_token_file() {
+        eprintln!("eyekey operator token: in {}", path.display());
+    }
     app.run_until_stopped().await
 }

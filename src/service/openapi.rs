@@ -72,12 +72,10 @@ impl Modify for BearerSchemes {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
         let mut operator = Http::new(HttpAuthScheme::Bearer);
-        operator.description =
-            Some("The operator token (EYEKEY_OPERATOR_TOKEN or <data-dir>/operator-token)".into());
+        operator.description = Some("The operator token (EYEKEY_OPERATOR_TOKEN or <data-dir>/operator-token)".into());
         components.add_security_scheme("operator", SecurityScheme::Http(operator));
         let mut display = Http::new(HttpAuthScheme::Bearer);
-        display.description =
-            Some("A display's access token, shown once at registration or rotation".into());
+        display.description = Some("A display's access token, shown once at registration or rotation".into());
         components.add_security_scheme("display", SecurityScheme::Http(display));
     }
 }

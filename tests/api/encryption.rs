@@ -86,6 +86,10 @@ async fn with_no_configuration_secrets_are_generated_into_private_files() {
     config.workers = 0;
     let app = Application::build(config.clone()).await.unwrap();
     let port = app.port();
+    assert_eq!(
+        app.operator_token_file(),
+        Some(dir.path().join("data").join("operator-token").as_path())
+    );
     let shutdown = app.shutdown_handle();
     let server = tokio::spawn(app.run_until_stopped());
 

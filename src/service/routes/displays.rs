@@ -89,8 +89,8 @@ pub struct DisplayList {
 }
 
 fn view(row: &DisplayRow) -> Result<DisplayView, ApiError> {
-    let geometry: DisplayGeometry = serde_json::from_str(&row.geometry)
-        .map_err(|e| ApiError::Internal(anyhow::anyhow!("stored geometry: {e}")))?;
+    let geometry: DisplayGeometry =
+        serde_json::from_str(&row.geometry).map_err(|e| ApiError::Internal(anyhow::anyhow!("stored geometry: {e}")))?;
     let (frame_width, frame_height) = geometry.frame_size();
     Ok(DisplayView {
         id: row.id.parse().unwrap_or_default(),
@@ -139,18 +139,10 @@ pub async fn register_display(
 ) -> Result<(StatusCode, Json<DisplayWithToken>), ApiError> {
     let name = body.name.trim();
     if name.is_empty() || name.chars().count() > 200 {
-        return Err(ApiError::invalid(
-            "name",
-            "name must be 1 to 200 characters",
-        ));
+        return Err(ApiError::invalid("name", "name must be 1 to 200 characters"));
     }
     let geometry = match (body.preset, body.geometry) {
-        (Some(_), Some(_)) => {
-            return Err(ApiError::invalid(
-                "preset",
-                "give either preset or geometry, not both",
-            ))
-        }
+        (Some(_), Some(_)) => return Err(ApiError::invalid("preset", "give either preset or geometry, not both")),
         (None, None) => return Err(ApiError::invalid("geometry", "give a preset or a geometry")),
         (Some(p), None) => {
             let name = serde_json::to_value(p)
@@ -162,19 +154,11 @@ pub async fn register_display(
         (None, Some(g)) => g,
     };
     geometry.validate().map_err(geometry_error)?;
-    let geometry_json =
-        serde_json::to_string(&geometry).map_err(|e| ApiError::Internal(e.into()))?;
+    let geometry_json = serde_json::to_string(&geometry).map_err(|e| ApiError::Internal(e.into()))?;
     let id = id_text(&Uuid::new_v4());
     let token = generate_token(TOKEN_PREFIX);
-    let row =
-        store::displays::insert(&state.db, &id, name, &geometry_json, &token_hash(&token)).await?;
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "display.register",
-        &format!("displays/{id}"),
-    )
-    .await?;
+    let row = store::displays::insert(&state.db, &id, name, &geometry_json, &token_hash(&token)).await?;
+    store::audit::record(&state.db, OPERATOR, "display.register", &format!("displays/{id}")).await?;
     Ok((
         StatusCode::CREATED,
         Json(DisplayWithToken {
@@ -250,13 +234,7 @@ pub async fn rotate_token(
     let row = store::displays::rotate_token(&state.db, &id, &token_hash(&token))
         .await?
         .ok_or(ApiError::NotFound("display"))?;
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "display.rotate_token",
-        &format!("displays/{id}"),
-    )
-    .await?;
+    store::audit::record(&state.db, OPERATOR, "display.rotate_token", &format!("displays/{id}")).await?;
     Ok(Json(DisplayWithToken {
         display: view(&row)?,
         token,
@@ -283,12 +261,6 @@ pub async fn delete_display(
     if !store::displays::delete(&state.db, &id).await? {
         return Err(ApiError::NotFound("display"));
     }
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "display.delete",
-        &format!("displays/{id}"),
-    )
-    .await?;
+    store::audit::record(&state.db, OPERATOR, "display.delete", &format!("displays/{id}")).await?;
     Ok(StatusCode::NO_CONTENT)
 }

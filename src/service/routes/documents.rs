@@ -117,28 +117,20 @@ pub async fn upload_document(
     headers: HeaderMap,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
-    let content_type = headers
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok());
+    let content_type = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok());
     let format = images::format_of_content_type(content_type).map_err(problem)?;
     let bytes = body.map_err(|e| {
         if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
             ApiError::TooLarge {
                 field: Some("body".into()),
-                message: format!(
-                    "the document exceeds {} bytes",
-                    state.config.limits.max_document_bytes
-                ),
+                message: format!("the document exceeds {} bytes", state.config.limits.max_document_bytes),
             }
         } else {
             ApiError::from(e)
         }
     })?;
     if bytes.is_empty() {
-        return Err(ApiError::invalid(
-            "body",
-            "the body is empty; send the image file",
-        ));
+        return Err(ApiError::invalid("body", "the body is empty; send the image file"));
     }
     let max_pixels = state.config.limits.max_document_pixels;
     let (header, bytes) = tokio::task::spawn_blocking(move || {
@@ -174,13 +166,7 @@ pub async fn upload_document(
         },
     )
     .await?;
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "document.upload",
-        &format!("documents/{id}"),
-    )
-    .await?;
+    store::audit::record(&state.db, OPERATOR, "document.upload", &format!("documents/{id}")).await?;
     Ok((StatusCode::CREATED, Json(DocumentView::from(&row))))
 }
 

@@ -38,10 +38,7 @@ async fn output_dir(state: &AppState, id: &Uuid) -> Result<std::path::PathBuf, A
         (JobState::Succeeded, Some(path)) => Ok(state.data_dir().join(path)),
         (s, _) => Err(ApiError::Conflict {
             code: "job_not_succeeded",
-            message: format!(
-                "the job is {}; its evaluation exists once it has succeeded",
-                s.as_str()
-            ),
+            message: format!("the job is {}; its evaluation exists once it has succeeded", s.as_str()),
         }),
     }
 }
@@ -64,13 +61,7 @@ pub async fn get_evaluation(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
     let dir = output_dir(&state, &id).await?;
-    stream_file(
-        &dir.join("report.json"),
-        "application/json",
-        None,
-        "evaluation report",
-    )
-    .await
+    stream_file(&dir.join("report.json"), "application/json", None, "evaluation report").await
 }
 
 /// Names of the job's simulated views (PNG).

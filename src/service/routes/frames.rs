@@ -74,9 +74,7 @@ async fn own_job(state: &AppState, client: &DisplayClient, id: &Uuid) -> Result<
     store::jobs::get(&state.db, &id_text(id))
         .await?
         .filter(|j| {
-            j.display_id == client.display_id
-                && j.job_state() == JobState::Succeeded
-                && j.bundle_path.is_some()
+            j.display_id == client.display_id && j.job_state() == JobState::Succeeded && j.bundle_path.is_some()
         })
         .ok_or(ApiError::NotFound("job"))
 }
@@ -144,9 +142,7 @@ pub async fn download_bundle(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
     let job = own_job(&state, &client, &id).await?;
-    let dir = state
-        .data_dir()
-        .join(job.bundle_path.as_deref().unwrap_or_default());
+    let dir = state.data_dir().join(job.bundle_path.as_deref().unwrap_or_default());
     let response = stream_file(
         &dir.join(ZIP_NAME),
         "application/zip",
@@ -185,16 +181,8 @@ pub async fn download_file(
         return Err(ApiError::NotFound("bundle file"));
     }
     let job = own_job(&state, &client, &id).await?;
-    let dir = state
-        .data_dir()
-        .join(job.bundle_path.as_deref().unwrap_or_default());
-    let response = stream_file(
-        &dir.join(&name),
-        content_type_of(&name),
-        None,
-        "bundle file",
-    )
-    .await?;
+    let dir = state.data_dir().join(job.bundle_path.as_deref().unwrap_or_default());
+    let response = stream_file(&dir.join(&name), content_type_of(&name), None, "bundle file").await?;
     store::audit::record(
         &state.db,
         &client.actor(),

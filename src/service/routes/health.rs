@@ -26,9 +26,7 @@ pub struct Health {
 /// Liveness: the process serves HTTP.
 #[utoipa::path(get, path = "/healthz", tag = "operations", responses((status = 200, description = "Alive", body = Health)))]
 pub async fn healthz() -> Json<Health> {
-    Json(Health {
-        status: "ok".into(),
-    })
+    Json(Health { status: "ok".into() })
 }
 
 /// Readiness: the database answers, every migration is applied, and the service is not shutting down.
@@ -44,12 +42,8 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
         return Err(ApiError::Unavailable("shutting down".into()));
     }
     match store::migrations_applied(&state.db).await {
-        Ok(true) => Ok(Json(Health {
-            status: "ready".into(),
-        })),
-        Ok(false) => Err(ApiError::Unavailable(
-            "database migrations are not all applied".into(),
-        )),
+        Ok(true) => Ok(Json(Health { status: "ready".into() })),
+        Ok(false) => Err(ApiError::Unavailable("database migrations are not all applied".into())),
         Err(e) => {
             tracing::warn!(error = %e, "readiness: database unreachable");
             Err(ApiError::Unavailable("the database does not answer".into()))

@@ -141,11 +141,8 @@ fn parse_id(s: &str) -> Uuid {
 impl TryFrom<&JobRow> for JobView {
     type Error = ApiError;
     fn try_from(r: &JobRow) -> Result<Self, ApiError> {
-        let internal = |what: &str, e: serde_json::Error| {
-            ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"))
-        };
-        let options: EncodeOptions =
-            serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
+        let internal = |what: &str, e: serde_json::Error| ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"));
+        let options: EncodeOptions = serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
         Ok(Self {
             id: parse_id(&r.id),
             state: r.job_state(),
@@ -166,10 +163,7 @@ impl TryFrom<&JobRow> for JobView {
                 .evaluation_summary
                 .as_deref()
                 .and_then(|s| serde_json::from_str(s).ok()),
-            bundle_files: r
-                .bundle_files
-                .as_deref()
-                .and_then(|s| serde_json::from_str(s).ok()),
+            bundle_files: r.bundle_files.as_deref().and_then(|s| serde_json::from_str(s).ok()),
             timings: JobTimings {
                 created_at: to_time(r.created_at),
                 started_at: r.started_at.map(to_time),
@@ -243,10 +237,7 @@ pub async fn create_job(
     let options = body.options.clone().unwrap_or_default();
     check_options(&options)?;
     if body.observer_profile_ids.len() > 16 {
-        return Err(ApiError::invalid(
-            "observer_profile_ids",
-            "at most 16 observers",
-        ));
+        return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
     // The canonical request (options filled in) identifies "the same request" for idempotency.
     let canonical = CreateJob {
@@ -276,9 +267,7 @@ pub async fn create_job(
     for (i, id) in body.observer_profile_ids.iter().enumerate() {
         let p = store::profiles::get(db, &id_text(id))
             .await?
-            .ok_or_else(|| {
-                ApiError::invalid(format!("observer_profile_ids[{i}]"), "no such profile")
-            })?;
+            .ok_or_else(|| ApiError::invalid(format!("observer_profile_ids[{i}]"), "no such profile"))?;
         observers.push(ObserverRef {
             profile_id: p.id,
             version: p.current_version,
@@ -380,10 +369,7 @@ pub async fn list_jobs(
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
     Ok(Json(JobList {
         next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
-        items: rows
-            .iter()
-            .map(JobView::try_from)
-            .collect::<Result<_, _>>()?,
+        items: rows.iter().map(JobView::try_from).collect::<Result<_, _>>()?,
     }))
 }
 
@@ -422,13 +408,7 @@ pub async fn cancel_job(
             })
         }
     };
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "job.cancel",
-        &format!("jobs/{}", row.id),
-    )
-    .await?;
+    store::audit::record(&state.db, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
     Ok((status, Json(JobView::try_from(&row)?)))
 }
@@ -495,11 +475,7 @@ impl Follow {
                     return None;
                 }
             };
-            let key = (
-                row.state.clone(),
-                (row.progress * 1000.0).round() as i64,
-                row.attempts,
-            );
+            let key = (row.state.clone(), (row.progress * 1000.0).round() as i64, row.attempts);
             if self.last.as_ref() != Some(&key) {
                 let kind = if self.last.as_ref().map(|l| &l.0) == Some(&key.0) {
                     "progress"
@@ -509,11 +485,7 @@ impl Follow {
                 self.last = Some(key);
                 self.done = row.job_state().is_terminal();
                 let view = JobView::try_from(&row).ok()?;
-                return Some(
-                    Event::default()
-                        .event(kind)
-                        .data(serde_json::to_string(&view).ok()?),
-                );
+                return Some(Event::default().event(kind).data(serde_json::to_string(&view).ok()?));
             }
             if !self.wait().await {
                 return None;

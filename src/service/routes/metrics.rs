@@ -3,7 +3,8 @@
 //! - `eyekey_jobs{state}` and `eyekey_queue_depth`: gauges read from the database at scrape time;
 //! - `eyekey_solve_duration_seconds{outcome}`: histogram of solver wall time per attempt;
 //! - `eyekey_jobs_finished_total{state}`: counter of jobs reaching a terminal state;
-//! - `eyekey_http_request_duration_seconds{method,route,status}`: histogram of HTTP latency by route.
+//! - `eyekey_http_request_duration_seconds{method,route,status}`: histogram of HTTP latency by route;
+//! - `eyekey_transport_cache_{hits,misses,bytes}`: the transport-operator cache.
 
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -35,25 +36,20 @@ pub fn recorder() -> PrometheusHandle {
                 .set_buckets_for_metric(
                     Matcher::Full("eyekey_http_request_duration_seconds".into()),
                     &[
-                        0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5,
-                        10.0,
+                        0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0,
                     ],
                 )
                 .and_then(|b| {
                     b.set_buckets_for_metric(
                         Matcher::Full("eyekey_solve_duration_seconds".into()),
-                        &[
-                            0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0,
-                        ],
+                        &[0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0],
                     )
                 })
                 .unwrap_or_else(|_| PrometheusBuilder::new());
             let recorder = builder.build_recorder();
             let handle = recorder.handle();
             if metrics::set_global_recorder(recorder).is_err() {
-                tracing::warn!(
-                    "another metrics recorder is installed; /metrics shows only the job gauges"
-                );
+                tracing::warn!("another metrics recorder is installed; /metrics shows only the job gauges");
             }
             handle
         })
@@ -75,6 +71,10 @@ pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError>
         .find(|(s, _)| *s == store::jobs::JobState::Queued)
         .map_or(0, |(_, n)| *n);
     metrics::gauge!("eyekey_queue_depth").set(queued as f64);
+    let (hits, misses, bytes) = crate::transport::TransportCache::global().stats();
+    metrics::gauge!("eyekey_transport_cache_hits").set(hits as f64);
+    metrics::gauge!("eyekey_transport_cache_misses").set(misses as f64);
+    metrics::gauge!("eyekey_transport_cache_bytes").set(bytes as f64);
     state.metrics.run_upkeep();
     let mut response = state.metrics.render().into_response();
     response.headers_mut().insert(

@@ -58,23 +58,18 @@ impl PageQuery {
                 format!("limit must be within 1..={MAX_PAGE}, got {limit}"),
             ));
         }
-        let cursor =
-            match &self.cursor {
-                Some(c) => Some(Cursor::decode(c).ok_or_else(|| {
-                    ApiError::invalid("cursor", "not a cursor this service issued")
-                })?),
-                None => None,
-            };
+        let cursor = match &self.cursor {
+            Some(c) => {
+                Some(Cursor::decode(c).ok_or_else(|| ApiError::invalid("cursor", "not a cursor this service issued"))?)
+            }
+            None => None,
+        };
         Ok((limit, cursor))
     }
 }
 
 /// The cursor of the next page, if `items` filled the page.
-pub fn next_cursor<T>(
-    items: &[T],
-    limit: u32,
-    key: impl Fn(&T) -> (i64, String),
-) -> Option<String> {
+pub fn next_cursor<T>(items: &[T], limit: u32, key: impl Fn(&T) -> (i64, String)) -> Option<String> {
     if items.len() < limit as usize {
         return None;
     }
@@ -101,15 +96,8 @@ pub async fn stream_file(
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ApiError::NotFound(what)),
         Err(e) => return Err(ApiError::Internal(e.into())),
     };
-    let len = file
-        .metadata()
-        .await
-        .map_err(|e| ApiError::Internal(e.into()))?
-        .len();
-    let mut response = Response::new(Body::from_stream(ReaderStream::with_capacity(
-        file,
-        64 * 1024,
-    )));
+    let len = file.metadata().await.map_err(|e| ApiError::Internal(e.into()))?.len();
+    let mut response = Response::new(Body::from_stream(ReaderStream::with_capacity(file, 64 * 1024)));
     let headers = response.headers_mut();
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     headers.insert(header::CONTENT_LENGTH, HeaderValue::from(len));

@@ -101,16 +101,11 @@ impl From<&ProfileRow> for ProfileMeta {
 fn check(body: &EnrolProfile) -> Result<Vec<u8>, ApiError> {
     if let Some(label) = &body.label {
         if label.chars().count() > 200 {
-            return Err(ApiError::invalid(
-                "label",
-                "label must be at most 200 characters",
-            ));
+            return Err(ApiError::invalid("label", "label must be at most 200 characters"));
         }
     }
     body.profile.validate().map_err(|e| match e {
-        ProfileError::Invalid { field, reason } => {
-            ApiError::invalid(format!("profile.{field}"), reason)
-        }
+        ProfileError::Invalid { field, reason } => ApiError::invalid(format!("profile.{field}"), reason),
         other => ApiError::Invalid {
             field: Some("profile".into()),
             message: other.to_string(),
@@ -152,21 +147,8 @@ pub async fn enrol_profile(
 ) -> Result<(StatusCode, Json<ProfileDetail>), ApiError> {
     let plain = check(&body)?;
     let id = id_text(&Uuid::new_v4());
-    let row = store::profiles::insert(
-        &state.db,
-        &state.master_key,
-        &id,
-        body.label.as_deref(),
-        &plain,
-    )
-    .await?;
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "profile.enrol",
-        &format!("profiles/{id}"),
-    )
-    .await?;
+    let row = store::profiles::insert(&state.db, &state.master_key, &id, body.label.as_deref(), &plain).await?;
+    store::audit::record(&state.db, OPERATOR, "profile.enrol", &format!("profiles/{id}")).await?;
     Ok((StatusCode::CREATED, Json(detail(&row, 1, body.profile))))
 }
 
@@ -196,8 +178,7 @@ pub async fn get_profile(
         .await?
         .ok_or(ApiError::NotFound("profile version"))?;
     let plain = sealed.open(&state.master_key)?;
-    let profile: VisionProfile =
-        serde_json::from_slice(&plain).map_err(|e| ApiError::Internal(e.into()))?;
+    let profile: VisionProfile = serde_json::from_slice(&plain).map_err(|e| ApiError::Internal(e.into()))?;
     Ok(Json(detail(&row, version, profile)))
 }
 
@@ -248,15 +229,9 @@ pub async fn reenrol_profile(
 ) -> Result<Json<ProfileDetail>, ApiError> {
     let plain = check(&body)?;
     let id = id_text(&id);
-    let row = store::profiles::add_version(
-        &state.db,
-        &state.master_key,
-        &id,
-        body.label.as_deref(),
-        &plain,
-    )
-    .await?
-    .ok_or(ApiError::NotFound("profile"))?;
+    let row = store::profiles::add_version(&state.db, &state.master_key, &id, body.label.as_deref(), &plain)
+        .await?
+        .ok_or(ApiError::NotFound("profile"))?;
     store::audit::record(
         &state.db,
         OPERATOR,
@@ -290,12 +265,6 @@ pub async fn delete_profile(
     if !store::profiles::delete(&state.db, &id).await? {
         return Err(ApiError::NotFound("profile"));
     }
-    store::audit::record(
-        &state.db,
-        OPERATOR,
-        "profile.delete",
-        &format!("profiles/{id}"),
-    )
-    .await?;
+    store::audit::record(&state.db, OPERATOR, "profile.delete", &format!("profiles/{id}")).await?;
     Ok(StatusCode::NO_CONTENT)
 }

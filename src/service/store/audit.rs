@@ -20,12 +20,7 @@ pub struct AuditRow {
 }
 
 /// Appends an entry.
-pub async fn record(
-    pool: &SqlitePool,
-    actor: &str,
-    action: &str,
-    resource: &str,
-) -> Result<(), sqlx::Error> {
+pub async fn record(pool: &SqlitePool, actor: &str, action: &str, resource: &str) -> Result<(), sqlx::Error> {
     sqlx::query("INSERT INTO audit_log (actor, action, resource, created_at) VALUES (?, ?, ?, ?)")
         .bind(actor)
         .bind(action)
@@ -37,14 +32,8 @@ pub async fn record(
 }
 
 /// Entries newest first, after `cursor` (whose `id` is the sequence number).
-pub async fn list(
-    pool: &SqlitePool,
-    limit: u32,
-    cursor: Option<&Cursor>,
-) -> Result<Vec<AuditRow>, sqlx::Error> {
-    let before = cursor
-        .and_then(|c| c.id.parse::<i64>().ok())
-        .unwrap_or(i64::MAX);
+pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<AuditRow>, sqlx::Error> {
+    let before = cursor.and_then(|c| c.id.parse::<i64>().ok()).unwrap_or(i64::MAX);
     sqlx::query_as::<_, AuditRow>(
         "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < ? ORDER BY id DESC LIMIT ?",
     )

@@ -59,10 +59,7 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DisplayRow>, sqlx
 }
 
 /// The live display whose token has this hash (the hash column is unique and indexed).
-pub async fn by_token_hash(
-    pool: &SqlitePool,
-    hash: &[u8],
-) -> Result<Option<DisplayRow>, sqlx::Error> {
+pub async fn by_token_hash(pool: &SqlitePool, hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
     sqlx::query_as::<_, DisplayRow>(&format!(
         "SELECT {COLUMNS} FROM displays WHERE token_hash = ? AND deleted_at IS NULL"
     ))
@@ -72,14 +69,8 @@ pub async fn by_token_hash(
 }
 
 /// Live displays, newest first.
-pub async fn list(
-    pool: &SqlitePool,
-    limit: u32,
-    cursor: Option<&Cursor>,
-) -> Result<Vec<DisplayRow>, sqlx::Error> {
-    let (at, id) = cursor
-        .map(|c| (c.created_at, c.id.as_str()))
-        .unwrap_or((i64::MAX, ""));
+pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DisplayRow>, sqlx::Error> {
+    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, DisplayRow>(&format!(
         "SELECT {COLUMNS} FROM displays
          WHERE deleted_at IS NULL AND (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
@@ -95,11 +86,7 @@ pub async fn list(
 }
 
 /// Replaces the token hash; the old token stops working at once.
-pub async fn rotate_token(
-    pool: &SqlitePool,
-    id: &str,
-    token_hash: &[u8],
-) -> Result<Option<DisplayRow>, sqlx::Error> {
+pub async fn rotate_token(pool: &SqlitePool, id: &str, token_hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
     sqlx::query_as::<_, DisplayRow>(&format!(
         "UPDATE displays SET token_hash = ?, token_rotated_at = ? WHERE id = ? AND deleted_at IS NULL
          RETURNING {COLUMNS}"
@@ -116,14 +103,13 @@ pub async fn rotate_token(
 pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
     let now = now_ms();
     let mut tx = pool.begin().await?;
-    let done =
-        sqlx::query("UPDATE displays SET deleted_at = ? WHERE id = ? AND deleted_at IS NULL")
-            .bind(now)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?
-            .rows_affected()
-            == 1;
+    let done = sqlx::query("UPDATE displays SET deleted_at = ? WHERE id = ? AND deleted_at IS NULL")
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?
+        .rows_affected()
+        == 1;
     if done {
         sqlx::query(
             "UPDATE jobs SET state = 'cancelled', last_error = 'the display was deleted', finished_at = ?,

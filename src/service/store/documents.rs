@@ -73,14 +73,8 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DocumentRow>, sql
 }
 
 /// Documents, newest first.
-pub async fn list(
-    pool: &SqlitePool,
-    limit: u32,
-    cursor: Option<&Cursor>,
-) -> Result<Vec<DocumentRow>, sqlx::Error> {
-    let (at, id) = cursor
-        .map(|c| (c.created_at, c.id.as_str()))
-        .unwrap_or((i64::MAX, ""));
+pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DocumentRow>, sqlx::Error> {
+    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, DocumentRow>(&format!(
         "SELECT {COLUMNS} FROM documents
          WHERE (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')

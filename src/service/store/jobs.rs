@@ -204,12 +204,10 @@ pub async fn enqueue(pool: &SqlitePool, job: &NewJob) -> Result<Enqueued, sqlx::
     if let Some(row) = inserted {
         return Ok(Enqueued::Created(row));
     }
-    let existing = sqlx::query_as::<_, JobRow>(&format!(
-        "SELECT {COLUMNS} FROM jobs WHERE idempotency_key = ?"
-    ))
-    .bind(&job.idempotency_key)
-    .fetch_one(pool)
-    .await?;
+    let existing = sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE idempotency_key = ?"))
+        .bind(&job.idempotency_key)
+        .fetch_one(pool)
+        .await?;
     if existing.request_hash == job.request_hash {
         Ok(Enqueued::Existing(existing))
     } else {
@@ -241,9 +239,7 @@ pub async fn list(
     limit: u32,
     cursor: Option<&Cursor>,
 ) -> Result<Vec<JobRow>, sqlx::Error> {
-    let (at, id) = cursor
-        .map(|c| (c.created_at, c.id.as_str()))
-        .unwrap_or((i64::MAX, ""));
+    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, JobRow>(&format!(
         "SELECT {COLUMNS} FROM jobs
          WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR display_id = ?2)
@@ -362,12 +358,7 @@ pub struct Success {
 }
 
 /// Marks the caller's attempt succeeded. False if it no longer owned the job.
-pub async fn mark_succeeded(
-    pool: &SqlitePool,
-    id: &str,
-    attempt: i64,
-    s: &Success,
-) -> Result<bool, sqlx::Error> {
+pub async fn mark_succeeded(pool: &SqlitePool, id: &str, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
     let now = now_ms();
     let r = sqlx::query(
         "UPDATE jobs SET state = 'succeeded', progress = 1, evaluation_summary = ?1, bundle_path = ?2,
@@ -438,19 +429,11 @@ pub async fn requeue(
 
 /// Number of jobs in each state.
 pub async fn count_by_state(pool: &SqlitePool) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
-    let rows: Vec<(String, i64)> =
-        sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
-            .fetch_all(pool)
-            .await?;
+    let rows: Vec<(String, i64)> = sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+        .fetch_all(pool)
+        .await?;
     Ok(JobState::ALL
         .into_iter()
-        .map(|s| {
-            (
-                s,
-                rows.iter()
-                    .find(|(n, _)| n == s.as_str())
-                    .map_or(0, |(_, c)| *c),
-            )
-        })
+        .map(|s| (s, rows.iter().find(|(n, _)| n == s.as_str()).map_or(0, |(_, c)| *c)))
         .collect())
 }

@@ -45,13 +45,10 @@ pub async fn migrate(pool: &SqlitePool) -> Result<(), sqlx::migrate::MigrateErro
 
 /// True when every embedded migration has been applied successfully.
 pub async fn migrations_applied(pool: &SqlitePool) -> Result<bool, sqlx::Error> {
-    let applied: Vec<(i64,)> =
-        sqlx::query_as("SELECT version FROM _sqlx_migrations WHERE success = 1")
-            .fetch_all(pool)
-            .await?;
-    Ok(MIGRATOR
-        .iter()
-        .all(|m| applied.iter().any(|(v,)| *v == m.version)))
+    let applied: Vec<(i64,)> = sqlx::query_as("SELECT version FROM _sqlx_migrations WHERE success = 1")
+        .fetch_all(pool)
+        .await?;
+    Ok(MIGRATOR.iter().all(|m| applied.iter().any(|(v,)| *v == m.version)))
 }
 
 /// Now, in the database's time unit (Unix milliseconds).
@@ -76,15 +73,12 @@ pub struct Cursor {
 impl Cursor {
     /// Opaque text form handed to clients.
     pub fn encode(&self) -> String {
-        base64::engine::general_purpose::URL_SAFE_NO_PAD
-            .encode(format!("{}|{}", self.created_at, self.id))
+        base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(format!("{}|{}", self.created_at, self.id))
     }
 
     /// Parses the text form; `None` when it is not one this service handed out.
     pub fn decode(text: &str) -> Option<Self> {
-        let raw = base64::engine::general_purpose::URL_SAFE_NO_PAD
-            .decode(text)
-            .ok()?;
+        let raw = base64::engine::general_purpose::URL_SAFE_NO_PAD.decode(text).ok()?;
         let raw = String::from_utf8(raw).ok()?;
         let (at, id) = raw.split_once('|')?;
         Some(Self {
@@ -100,10 +94,7 @@ pub const DEFAULT_PAGE: u32 = 50;
 pub const MAX_PAGE: u32 = 200;
 
 /// The store of a sealed value that proves the master key has not changed since the data was written.
-pub async fn check_master_key(
-    pool: &SqlitePool,
-    key: &super::crypto::MasterKey,
-) -> anyhow::Result<()> {
+pub async fn check_master_key(pool: &SqlitePool, key: &super::crypto::MasterKey) -> anyhow::Result<()> {
     const NAME: &str = "master_key_check";
     const PLAIN: &[u8] = b"eyekey master key check";
     let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT value FROM settings WHERE name = ?")

@@ -71,13 +71,15 @@ pub async fn insert(
     .bind(now)
     .fetch_one(&mut *tx)
     .await?;
-    sqlx::query("INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, 1, ?, ?, ?)")
-        .bind(id)
-        .bind(sealed.nonce)
-        .bind(sealed.ciphertext)
-        .bind(now)
-        .execute(&mut *tx)
-        .await?;
+    sqlx::query(
+        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, 1, ?, ?, ?)",
+    )
+    .bind(id)
+    .bind(sealed.nonce)
+    .bind(sealed.ciphertext)
+    .bind(now)
+    .execute(&mut *tx)
+    .await?;
     tx.commit().await?;
     Ok(row)
 }
@@ -107,14 +109,16 @@ pub async fn add_version(
         return Ok(None);
     };
     let sealed = key.seal(profile_json, &profile_aad(id, row.current_version))?;
-    sqlx::query("INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, ?, ?, ?, ?)")
-        .bind(id)
-        .bind(row.current_version)
-        .bind(sealed.nonce)
-        .bind(sealed.ciphertext)
-        .bind(now)
-        .execute(&mut *tx)
-        .await?;
+    sqlx::query(
+        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, ?, ?, ?, ?)",
+    )
+    .bind(id)
+    .bind(row.current_version)
+    .bind(sealed.nonce)
+    .bind(sealed.ciphertext)
+    .bind(now)
+    .execute(&mut *tx)
+    .await?;
     tx.commit().await?;
     Ok(Some(row))
 }
@@ -130,11 +134,7 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<ProfileRow>, sqlx
 }
 
 /// One sealed version of a live profile.
-pub async fn get_version(
-    pool: &SqlitePool,
-    id: &str,
-    version: i64,
-) -> Result<Option<ProfileVersionRow>, sqlx::Error> {
+pub async fn get_version(pool: &SqlitePool, id: &str, version: i64) -> Result<Option<ProfileVersionRow>, sqlx::Error> {
     sqlx::query_as::<_, ProfileVersionRow>(
         "SELECT v.profile_id, v.version, v.nonce, v.ciphertext, v.created_at
          FROM profile_versions v JOIN profiles p ON p.id = v.profile_id
@@ -147,14 +147,8 @@ pub async fn get_version(
 }
 
 /// Live profiles, newest first.
-pub async fn list(
-    pool: &SqlitePool,
-    limit: u32,
-    cursor: Option<&Cursor>,
-) -> Result<Vec<ProfileRow>, sqlx::Error> {
-    let (at, id) = cursor
-        .map(|c| (c.created_at, c.id.as_str()))
-        .unwrap_or((i64::MAX, ""));
+pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<ProfileRow>, sqlx::Error> {
+    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     // Keyset pagination on (created_at, id): stable under concurrent inserts, unlike OFFSET.
     sqlx::query_as::<_, ProfileRow>(&format!(
         "SELECT {COLUMNS} FROM profiles
@@ -176,15 +170,13 @@ pub async fn list(
 pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
     let now = now_ms();
     let mut tx = pool.begin().await?;
-    let done = sqlx::query(
-        "UPDATE profiles SET deleted_at = ?, updated_at = ? WHERE id = ? AND deleted_at IS NULL",
-    )
-    .bind(now)
-    .bind(now)
-    .bind(id)
-    .execute(&mut *tx)
-    .await?
-    .rows_affected()
+    let done = sqlx::query("UPDATE profiles SET deleted_at = ?, updated_at = ? WHERE id = ? AND deleted_at IS NULL")
+        .bind(now)
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?
+        .rows_affected()
         == 1;
     if done {
         sqlx::query("DELETE FROM profile_versions WHERE profile_id = ?")
