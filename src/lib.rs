@@ -5,6 +5,7 @@
 
 pub mod bench;
 pub mod bundle;
+pub mod calibration;
 pub mod cli;
 pub mod display;
 pub mod encode;
