@@ -9,7 +9,7 @@ use std::time::Duration;
 /// Secrets (`EYEKEY_OPERATOR_TOKEN`, `EYEKEY_MASTER_KEY`) are best passed through the environment; when
 /// absent they are read from, or generated into, `operator-token` and `master.key` in the data directory
 /// (mode 0600). Their values are never logged.
-#[derive(clap::Args, Clone, Debug)]
+#[derive(clap::Args, Clone)]
 pub struct ServeArgs {
     /// Address and port to listen on.
     #[arg(long, env = "EYEKEY_BIND", default_value = "127.0.0.1:8080")]
@@ -53,8 +53,8 @@ pub struct ServeArgs {
     pub transport_cache_mb: usize,
 }
 
-/// Everything the service needs to start.
-#[derive(Clone, Debug)]
+/// Everything the service needs to start. Its `Debug` hides the secrets.
+#[derive(Clone)]
 pub struct Config {
     /// Listen address; port 0 picks a free port (see `Application::port`).
     pub bind: SocketAddr,
@@ -165,5 +165,53 @@ impl From<ServeArgs> for Config {
             },
             transport_cache_bytes: a.transport_cache_mb.saturating_mul(1 << 20),
         }
+    }
+}
+
+/// Stands in for a secret in `Debug` output.
+fn redacted(secret: &Option<String>) -> &'static str {
+    if secret.is_some() {
+        "Some(<redacted>)"
+    } else {
+        "None"
+    }
+}
+
+impl std::fmt::Debug for Config {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Config")
+            .field("bind", &self.bind)
+            .field("data_dir", &self.data_dir)
+            .field("operator_token", &redacted(&self.operator_token))
+            .field("master_key_hex", &redacted(&self.master_key_hex))
+            .field("workers", &self.workers)
+            .field("limits", &self.limits)
+            .field("queue", &self.queue)
+            .field("transport_cache_bytes", &self.transport_cache_bytes)
+            .finish()
+    }
+}
+
+impl std::fmt::Debug for ServeArgs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Debug::fmt(&Config::from(self.clone()), f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn debug_output_never_shows_the_secrets() {
+        let mut c = Config::new("/tmp/x");
+        c.operator_token = Some("op-secret".into());
+        c.master_key_hex = Some("ab".repeat(32));
+        let text = format!("{c:?}");
+        assert!(
+            !text.contains("op-secret") && !text.contains(&"ab".repeat(32)),
+            "{text}"
+        );
+        assert!(text.contains("<redacted>"));
     }
 }

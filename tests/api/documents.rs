@@ -136,3 +136,17 @@ async fn a_body_over_the_byte_limit_is_refused() {
     .await;
     assert!(e["message"].as_str().unwrap().contains("1000 bytes"), "{e}");
 }
+
+#[tokio::test]
+async fn documents_have_their_own_byte_limit_above_the_json_one() {
+    let app = spawn_app_with(|c| c.limits.max_body_bytes = 1000).await;
+    // A noisy image compresses badly: well over the JSON body limit.
+    let img = image::RgbImage::from_fn(64, 64, |x, y| {
+        image::Rgb([(x * 37 + y * 91) as u8, (x * y) as u8, (x ^ y) as u8])
+    });
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    assert!(png.len() > 1000);
+    expect_json(upload(&app, "image/png", png).await, StatusCode::CREATED).await;
+}
