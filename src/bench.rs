@@ -37,7 +37,19 @@ pub fn streaming_read_gbps() -> f64 {
     let mut sink = 0.0f64;
     for _ in 0..5 {
         let t = Instant::now();
-        sink += data.par_chunks(1 << 16).map(|c| c.iter().map(|v| *v as f64).sum::<f64>()).sum::<f64>();
+        // Sixteen independent lanes per chunk so the sum vectorises and memory, not the adder, is the limit.
+        sink += data
+            .par_chunks(1 << 16)
+            .map(|c| {
+                let mut acc = [0f32; 16];
+                for block in c.chunks_exact(16) {
+                    for (a, v) in acc.iter_mut().zip(block) {
+                        *a += v;
+                    }
+                }
+                acc.iter().map(|v| *v as f64).sum::<f64>()
+            })
+            .sum::<f64>();
         best = best.min(t.elapsed().as_secs_f64());
     }
     std::hint::black_box(sink);

@@ -15,7 +15,6 @@
 //! Light-field layout everywhere: band-interleaved, `l[p * n_bands + n]` for sample p (frame order, see
 //! [`DisplayGeometry::sample_index`]) and band n. Retinal images: `y[r * 3 + a]`, a = L, M, S.
 
-use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 use crate::display::DisplayGeometry;
@@ -162,10 +161,12 @@ impl CsrMatrix {
 }
 
 /// Rows per rayon task in the sparse kernels: large enough to amortise scheduling, small enough to balance.
-const ROWS_PER_TASK: usize = 256;
+const ROWS_PER_TASK: usize = 2048;
 
-/// out[r·3 + a] = Σ_n c[n][a] Σ_e v_e · x[col_e · N + n]: the sparse product fused with the spectral
-/// coupling of Eq. 13. With `coupling` = None the output has N channels per row instead (T·L per band).
+/// out[r·3 + a] = Σ_n c[n][a] Σ_e v_e · x[col_e · N + n] (forward, Eq. 13), or with `transpose_mix`
+/// out[r·N + n] = Σ_a c[n][a] Σ_e v_e · y[col_e · 3 + a] (adjoint): the sparse product fused with the spectral
+/// coupling. Dispatches to a version specialised on the input width for the common 3- and 4-band cases.
+#[allow(clippy::too_many_arguments)]
 fn spmv_fused(
     indptr: &[u32],
     indices: &[u32],
@@ -178,33 +179,49 @@ fn spmv_fused(
     n_out: usize,
 ) {
     debug_assert!(n_in <= 16 && n_out <= 16);
+    match n_in {
+        3 => spmv_fixed::<3>(indptr, indices, values, x, mix, transpose_mix, out, n_out),
+        4 => spmv_fixed::<4>(indptr, indices, values, x, mix, transpose_mix, out, n_out),
+        _ => spmv_fixed::<16>(indptr, indices, values, x, mix, transpose_mix, out, n_out),
+    }
+}
+
+/// The kernel for an input width of at most `NI` (exactly `NI` when NI < 16; `x.len() / n_cols` otherwise).
+#[allow(clippy::too_many_arguments)]
+fn spmv_fixed<const NI: usize>(
+    indptr: &[u32],
+    indices: &[u32],
+    values: &[f32],
+    x: &[f32],
+    mix: &[[f32; 3]],
+    transpose_mix: bool,
+    out: &mut [f32],
+    n_out: usize,
+) {
+    let n_in = if NI < 16 { NI } else if transpose_mix { 3 } else { mix.len() };
     out.par_chunks_mut(ROWS_PER_TASK * n_out).enumerate().for_each(|(chunk, out_rows)| {
         let first = chunk * ROWS_PER_TASK;
         for (k, o) in out_rows.chunks_exact_mut(n_out).enumerate() {
             let r = first + k;
-            let mut acc = [0f32; 16];
+            let mut acc = [0f32; NI];
             let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
             for e in a..b {
                 let v = values[e];
                 let base = indices[e] as usize * n_in;
                 let xs = &x[base..base + n_in];
-                for n in 0..n_in {
-                    acc[n] += v * xs[n];
+                for (slot, xv) in acc.iter_mut().zip(xs) {
+                    *slot += v * xv;
                 }
             }
             if transpose_mix {
                 // Adjoint: out_n = Σ_a c[n][a] acc_a.
-                for (n, slot) in o.iter_mut().enumerate() {
-                    *slot = mix[n][0] * acc[0] + mix[n][1] * acc[1] + mix[n][2] * acc[2];
+                for (slot, m) in o.iter_mut().zip(mix) {
+                    *slot = m[0] * acc[0] + m[1] * acc[1] + m[2] * acc[2];
                 }
             } else {
                 // Forward: out_a = Σ_n c[n][a] acc_n.
                 for (a, slot) in o.iter_mut().enumerate() {
-                    let mut s = 0f32;
-                    for (n, m) in mix.iter().enumerate() {
-                        s += m[a] * acc[n];
-                    }
-                    *slot = s;
+                    *slot = mix.iter().zip(&acc).map(|(m, v)| m[a] * v).sum();
                 }
             }
         }
@@ -243,13 +260,46 @@ pub struct TransportStats {
     pub sub_rays_off_grid: u64,
 }
 
-/// One sub-ray's contribution before splatting.
+/// One sub-ray's landing point before splatting.
 struct Landing {
     col: u32,
     /// Landing point in retinal-grid pixel units.
     f: [f64; 2],
-    /// ∂f/∂W_j per derivative term (pixel units per µm).
-    df: Vec<[f64; 2]>,
+}
+
+/// One bilinear splat: a (landing, corner) pair keyed by (column, row).
+struct Splat {
+    key: u64,
+    w: f32,
+    landing: u32,
+    corner: u8,
+}
+
+/// Bilinear weight of `corner` (bit 0: +x, bit 1: +y) for a point at `f` (pixel units), and its gradient
+/// with respect to f.
+fn bilinear(f: [f64; 2], corner: u8) -> (f64, [f64; 2]) {
+    let (tx, ty) = (f[0] - f[0].floor(), f[1] - f[1].floor());
+    let (wx, dwx) = if corner & 1 == 0 { (1.0 - tx, -1.0) } else { (tx, 1.0) };
+    let (wy, dwy) = if corner & 2 == 0 { (1.0 - ty, -1.0) } else { (ty, 1.0) };
+    (wx * wy, [dwx * wy, wx * dwy])
+}
+
+/// SplitMix64 (Steele, Lea & Flood 2014): a tiny, fast, seedable generator for the sub-ray jitter.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
 }
 
 impl TransportMatrix {
@@ -309,10 +359,10 @@ impl TransportMatrix {
             .map(|h| {
                 let (hx, hy) = ((h as u32) % display.holes_x, (h as u32) / display.holes_x);
                 let centre = display.hole_centre_mm(hx, hy);
-                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-                    options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-                );
-                let mut landings: Vec<Landing> = Vec::with_capacity(views * s / 2);
+                let mut rng = SplitMix64(options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
+                // ∂f/∂W_j per landing, flat: landing index × n_terms.
+                let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * n_terms);
                 let mut traced = 0u64;
                 for j in 0..display.views_v {
                     for i in 0..display.views_u {
@@ -321,12 +371,12 @@ impl TransportMatrix {
                         for _ in 0..s {
                             traced += 1;
                             // Uniform point in the hole's disc and in the screen pixel's square.
-                            let rho = 0.5 * display.hole_diameter_mm * rng.gen::<f64>().sqrt();
-                            let phi = std::f64::consts::TAU * rng.gen::<f64>();
-                            let sx = centre[0] + rho * phi.cos();
-                            let sy = centre[1] + rho * phi.sin();
-                            let qx = q0[0] + (rng.gen::<f64>() - 0.5) * display.screen_pixel_pitch_mm;
-                            let qy = q0[1] + (rng.gen::<f64>() - 0.5) * display.screen_pixel_pitch_mm;
+                            let rho = 0.5 * display.hole_diameter_mm * rng.next_f64().sqrt();
+                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                            let sx = centre[0] + rho * cos;
+                            let sy = centre[1] + rho * sin;
+                            let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
                             // Slope (u, v) = (s − q)/g; the ray meets the pupil plane at P = s + d·(u, v).
                             let px = sx + d_eye * (sx - qx) / display.gap_mm - eye.x_mm;
                             let py = sy + d_eye * (sy - qy) / display.gap_mm - eye.y_mm;
@@ -339,14 +389,11 @@ impl TransportMatrix {
                                 (sx - grid.origin_mm[0]) / grid.pixel_mm + shift_per_grad * g[0],
                                 (sy - grid.origin_mm[1]) / grid.pixel_mm + shift_per_grad * g[1],
                             ];
-                            let df = term_polys
-                                .iter()
-                                .map(|tp| {
-                                    let gk = tp.gradient(ux, uy);
-                                    [shift_per_grad * gk[0], shift_per_grad * gk[1]]
-                                })
-                                .collect();
-                            landings.push(Landing { col, f, df });
+                            for tp in &term_polys {
+                                let gk = tp.gradient(ux, uy);
+                                dfs.push([shift_per_grad * gk[0], shift_per_grad * gk[1]]);
+                            }
+                            landings.push(Landing { col, f });
                         }
                     }
                 }
@@ -354,36 +401,32 @@ impl TransportMatrix {
                 // Each hole's light, spread over k² retinal pixels per hole pitch, keeps its intensity.
                 let k2 = (options.retina_oversample * options.retina_oversample) as f64;
                 let weight = if in_pupil > 0 { k2 / in_pupil as f64 } else { 0.0 };
-                // Bilinear splat; entries (col, row) with weight and derivative weights.
-                let mut entries: Vec<(u32, u32, f32, Vec<f32>)> = Vec::with_capacity(landings.len() * 4);
+                // Bilinear splat: one entry per (landing, corner), keyed by (column, row).
+                let mut entries: Vec<Splat> = Vec::with_capacity(landings.len() * 4);
                 let mut off_grid = 0u64;
-                for l in &landings {
-                    let (fx, fy) = (l.f[0], l.f[1]);
-                    let (x0, y0) = (fx.floor(), fy.floor());
-                    let (tx, ty) = (fx - x0, fy - y0);
+                for (li, l) in landings.iter().enumerate() {
+                    let (x0, y0) = (l.f[0].floor(), l.f[1].floor());
                     let mut any = false;
-                    for (dy, wy, dwy) in [(0, 1.0 - ty, -1.0), (1, ty, 1.0)] {
-                        for (dx, wx, dwx) in [(0, 1.0 - tx, -1.0), (1, tx, 1.0)] {
-                            let (gx, gy) = (x0 as i64 + dx, y0 as i64 + dy);
-                            if gx < 0 || gy < 0 || gx >= grid.width as i64 || gy >= grid.height as i64 {
-                                continue;
-                            }
-                            any = true;
-                            let row = (gy as u32) * grid.width + gx as u32;
-                            // ∂(wx·wy)/∂W_j = (dwx·wy·∂fx + wx·dwy·∂fy).
-                            let dws = l
-                                .df
-                                .iter()
-                                .map(|d| (weight * (dwx * wy * d[0] + wx * dwy * d[1])) as f32)
-                                .collect();
-                            entries.push((l.col, row, (weight * wx * wy) as f32, dws));
+                    for corner in 0..4u8 {
+                        let (gx, gy) = (x0 as i64 + (corner & 1) as i64, y0 as i64 + (corner >> 1) as i64);
+                        if gx < 0 || gy < 0 || gx >= grid.width as i64 || gy >= grid.height as i64 {
+                            continue;
                         }
+                        any = true;
+                        let row = (gy as u32) * grid.width + gx as u32;
+                        let (w, _) = bilinear(l.f, corner);
+                        entries.push(Splat {
+                            key: (u64::from(l.col) << 32) | u64::from(row),
+                            w: (weight * w) as f32,
+                            landing: li as u32,
+                            corner,
+                        });
                     }
                     if !any {
                         off_grid += 1;
                     }
                 }
-                entries.sort_unstable_by_key(|e| (e.0, e.1));
+                entries.sort_unstable_by_key(|e| e.key);
                 let mut out = HoleOut {
                     cols: Vec::with_capacity(entries.len()),
                     rows: Vec::with_capacity(entries.len()),
@@ -393,19 +436,25 @@ impl TransportMatrix {
                     in_pupil,
                     off_grid,
                 };
-                for (c, r, w, dws) in entries {
-                    let merge = out.cols.last() == Some(&c) && out.rows.last() == Some(&r);
-                    if merge {
-                        *out.w.last_mut().expect("merge implies an entry") += w;
+                let mut last_key = u64::MAX;
+                for e in entries {
+                    if e.key != last_key {
+                        out.cols.push((e.key >> 32) as u32);
+                        out.rows.push(e.key as u32);
+                        out.w.push(0.0);
+                        out.dw.extend(std::iter::repeat_n(0.0, n_terms));
+                        last_key = e.key;
+                    }
+                    *out.w.last_mut().expect("an entry was pushed") += e.w;
+                    if n_terms > 0 {
+                        // ∂(wx·wy)/∂W_j = ∂wx/∂fx·wy·∂fx/∂W_j + wx·∂wy/∂fy·∂fy/∂W_j.
+                        let l = &landings[e.landing as usize];
+                        let (_, dwdf) = bilinear(l.f, e.corner);
                         let base = out.dw.len() - n_terms;
-                        for (k, v) in dws.iter().enumerate() {
-                            out.dw[base + k] += v;
+                        let df = &dfs[e.landing as usize * n_terms..(e.landing as usize + 1) * n_terms];
+                        for (k, d) in df.iter().enumerate() {
+                            out.dw[base + k] += (weight * (dwdf[0] * d[0] + dwdf[1] * d[1])) as f32;
                         }
-                    } else {
-                        out.cols.push(c);
-                        out.rows.push(r);
-                        out.w.push(w);
-                        out.dw.extend_from_slice(&dws);
                     }
                 }
                 out
@@ -641,6 +690,7 @@ pub fn plain_light_field(display: &DisplayGeometry, per_hole: &[f32]) -> Vec<f32
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
     use crate::optics::zernike::Prescription;
 
     fn tiny() -> DisplayGeometry {
