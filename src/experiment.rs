@@ -102,8 +102,11 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
     let mut rows = Vec::new();
     let mut md = String::new();
     let cancel = AtomicBool::new(false);
+    // A plain display shows the document at the display's full white, not at the encoders' objective level.
+    let plain_reference = Reference::new(&document, grid.width, grid.height, 1.0, crate::evaluate::DEFAULT_THRESHOLD);
     let score_all = |figure: &str, variant: &str, l: &[f32], rows: &mut Vec<Row>| -> Vec<(String, RgbImage)> {
         let mut tiles = Vec::new();
+        let reference = if figure == "13" { &plain_reference } else { &reference };
         for ((name, _), v) in observers.iter().zip(&viewers) {
             let (s, pic) = reference.score_observer(name, v, l);
             tiles.push((format!("{} {:.2}", name.split(' ').next().unwrap_or(""), s.legibility), pic));
