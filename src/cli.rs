@@ -164,6 +164,9 @@ pub struct EncodeArgs {
     /// λ_c of Eq. 16.
     #[arg(long)]
     pub lambda_c: Option<f64>,
+    /// Also make the target read from eye positions this far off axis, mm (head movement).
+    #[arg(long)]
+    pub head_radius: Option<f64>,
     /// Output bundle directory (must not exist).
     #[arg(long)]
     pub out: PathBuf,
@@ -489,6 +492,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         lambda_w: a.lambda_w.unwrap_or(d.lambda_w),
         lambda_c: a.lambda_c.unwrap_or(d.lambda_c),
         evaluation_population: 0,
+        head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {
         bail!("--decoy-kind image needs --decoy IMAGE");

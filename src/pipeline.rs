@@ -75,6 +75,10 @@ pub struct EncodeOptions {
     pub lambda_c: f64,
     /// People sampled from the population for the evaluation report (0 skips it).
     pub evaluation_population: u32,
+    /// Head-movement robustness: besides the design position, the target must also read from four eye
+    /// positions this far off axis (mm; 0 = only the design position). Stacked observers, as in the
+    /// 2014 eyeglasses-free display.
+    pub head_radius_mm: f64,
 }
 
 impl Default for EncodeOptions {
@@ -92,6 +96,7 @@ impl Default for EncodeOptions {
             lambda_w: 0.05,
             lambda_c: 0.05,
             evaluation_population: 20,
+            head_radius_mm: 0.0,
         }
     }
 }
@@ -172,6 +177,9 @@ impl EncodeOptions {
             if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
                 return bad(name, format!("must be within 0..=100, got {v}"));
             }
+        }
+        if !(self.head_radius_mm.is_finite() && (0.0..=20.0).contains(&self.head_radius_mm)) {
+            return bad("head_radius_mm", format!("must be within 0..=20 mm, got {}", self.head_radius_mm));
         }
         if self.evaluation_population > 2000 {
             return bad("evaluation_population", format!("at most 2000, got {}", self.evaluation_population));
@@ -268,7 +276,20 @@ pub fn encode(
     let g = target.transport.grid;
     let target_obj = target.objective(&spec.document, OBJECTIVE_LEVEL);
     let energy: f64 = target_obj.iter().map(|v| (*v as f64).powi(2)).sum();
-    let mut terms = vec![Term { observer: &target, objective: target_obj, weight: 1.0 }];
+    // Stacked target observers at four eye positions on a ring of radius head_radius_mm, each asked for the
+    // document with a quarter of the central weight.
+    let mut moved = Vec::new();
+    if o.head_radius_mm > 0.0 {
+        let r = o.head_radius_mm;
+        for (dx, dy) in [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
+            let eye = EyePosition { x_mm: dx, y_mm: dy, dz_mm: 0.0 };
+            moved.push(Observer::new(d, &spec.target, eye, &base).map_err(internal)?);
+        }
+    }
+    let mut terms = vec![Term { observer: &target, objective: target_obj.clone(), weight: 1.0 }];
+    for m in &moved {
+        terms.push(Term { observer: m, objective: target_obj.clone(), weight: 0.25 });
+    }
     for (k, obs) in others.iter().enumerate() {
         let decoy_img = match (o.decoy, &spec.decoy) {
             (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
