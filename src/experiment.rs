@@ -423,6 +423,21 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
     for p in &frontier {
         writeln!(md, "- {}: target {:.2}, readable {:.1} %", p.label, p.target_legibility, 100.0 * p.readable_fraction)?;
     }
+    // The `secure` preset is chosen from the frontier: the fewest readers among points where the target reads
+    // with legibility ≥ 0.85.
+    if let Some(best) = frontier
+        .iter()
+        .filter(|p| p.target_legibility >= 0.85)
+        .min_by(|a, b| a.readable_fraction.total_cmp(&b.readable_fraction))
+    {
+        writeln!(
+            md,
+            "\nChosen for the `secure` preset (fewest readers with target legibility ≥ 0.85): **{}** (target {:.2}, readable {:.1} %).",
+            best.label,
+            best.target_legibility,
+            100.0 * best.readable_fraction
+        )?;
+    }
     std::fs::write(out.join("sweep.md"), &md)?;
     std::fs::write(out.join("sweep.json"), serde_json::to_string_pretty(&points)?)?;
     Ok((md, points))
