@@ -74,11 +74,11 @@ impl Application {
         };
         let master_key = MasterKey::from_hex(&master_key_text).context("EYEKEY_MASTER_KEY")?;
 
-        let db = store::connect(&config.database_path())
+        let (db, writer) = store::connect(&config.database_path())
             .await
             .with_context(|| format!("opening {}", config.database_path().display()))?;
-        store::migrate(&db).await.context("applying database migrations")?;
-        store::check_master_key(&db, &master_key).await?;
+        store::migrate(&writer).await.context("applying database migrations")?;
+        store::check_master_key(&writer, &master_key).await?;
         tracing::info!(database = %config.database_path().display(), "database ready");
 
         crate::transport::TransportCache::global().set_capacity_bytes(config.transport_cache_bytes);
@@ -89,6 +89,7 @@ impl Application {
         let (shutdown_tx, shutdown_rx) = watch::channel(false);
         let state = AppState(Arc::new(Inner {
             db,
+            writer,
             operator_token_hash: token_hash(&operator_token),
             master_key,
             events: broadcast::channel(1024).0,
@@ -174,6 +175,7 @@ impl Application {
             workers.abort_all();
         }
         state.db.close().await;
+        state.writer.0.close().await;
         tracing::info!("eyekey stopped");
         Ok(())
     }

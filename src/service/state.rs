@@ -9,6 +9,7 @@ use tokio::sync::{broadcast, watch, Notify};
 use super::config::Config;
 use super::crypto::MasterKey;
 use super::store::jobs::{JobRow, JobState};
+use super::store::Writer;
 
 /// A change of a job's state or progress, broadcast to event streams.
 #[derive(Clone, Debug)]
@@ -41,8 +42,10 @@ pub struct AppState(pub Arc<Inner>);
 
 /// The contents of [`AppState`].
 pub struct Inner {
-    /// The database.
+    /// The database, for reads.
     pub db: SqlitePool,
+    /// The database's single writing connection (see [`Writer`]).
+    pub writer: Writer,
     /// Configuration, secrets resolved.
     pub config: Config,
     /// Key sealing profiles.

@@ -254,10 +254,15 @@ impl TestApp {
     /// Claims the next job directly and completes it with a hand-made bundle (frames, mask, manifest,
     /// report and a view), as a worker would after a successful solve. Returns the job id.
     pub async fn complete_with_fake_bundle(&self) -> String {
-        let job = store::jobs::claim_next(&self.state.db, "test-worker", Duration::from_secs(30), store::now_ms())
-            .await
-            .unwrap()
-            .expect("a queued job");
+        let job = store::jobs::claim_next(
+            &self.state.writer,
+            "test-worker",
+            Duration::from_secs(30),
+            store::now_ms(),
+        )
+        .await
+        .unwrap()
+        .expect("a queued job");
         let dir = self.data_dir.join("jobs").join(&job.id);
         std::fs::create_dir_all(dir.join("views")).unwrap();
         for name in ["frame_0.png", "frame_1.png", "barrier_mask.png"] {
@@ -268,7 +273,7 @@ impl TestApp {
         std::fs::write(dir.join("views").join("target.png"), document_png(4, 4)).unwrap();
         let files = bundle::seal_bundle(&dir).unwrap();
         let ok = store::jobs::mark_succeeded(
-            &self.state.db,
+            &self.state.writer,
             &job.id,
             job.attempts,
             &store::jobs::Success {

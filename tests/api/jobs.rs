@@ -176,10 +176,15 @@ async fn cancelling_a_running_job_stops_it_and_it_ends_cancelled() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    let claimed = store::jobs::claim_next(&app.state.db, "test-worker", Duration::from_secs(30), store::now_ms())
-        .await
-        .unwrap()
-        .unwrap();
+    let claimed = store::jobs::claim_next(
+        &app.state.writer,
+        "test-worker",
+        Duration::from_secs(30),
+        store::now_ms(),
+    )
+    .await
+    .unwrap()
+    .unwrap();
     let r = app.op_post(&format!("/v1/jobs/{id}/cancel"), &json!({})).await;
     let job = expect_json(r, StatusCode::ACCEPTED).await;
     assert_eq!(

@@ -17,7 +17,7 @@ async fn an_expired_lease_requeues_the_job_while_attempts_remain_then_fails_it_w
     .await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    let db = &app.state.db;
+    let db = &app.state.writer;
     let t0 = store::now_ms();
 
     // A worker claims the job and dies (no heartbeat).
@@ -72,7 +72,7 @@ async fn the_worker_step_ends_exhausted_jobs_before_claiming() {
     .await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
-    store::jobs::claim_next(&app.state.db, "dead-worker", LEASE, store::now_ms())
+    store::jobs::claim_next(&app.state.writer, "dead-worker", LEASE, store::now_ms())
         .await
         .unwrap()
         .unwrap();
@@ -90,7 +90,7 @@ async fn concurrent_claims_never_take_the_same_job_twice() {
     }
     let now = store::now_ms();
     let claims = (0..10).map(|i| {
-        let db = app.state.db.clone();
+        let db = app.state.writer.clone();
         async move {
             store::jobs::claim_next(&db, &format!("w{i}"), Duration::from_secs(30), now)
                 .await
@@ -110,11 +110,11 @@ async fn jobs_are_claimed_oldest_first() {
     tokio::time::sleep(Duration::from_millis(5)).await;
     let b = app.create_job(&f).await["id"].as_str().unwrap().to_string();
     let now = store::now_ms();
-    let first = store::jobs::claim_next(&app.state.db, "w", Duration::from_secs(30), now)
+    let first = store::jobs::claim_next(&app.state.writer, "w", Duration::from_secs(30), now)
         .await
         .unwrap()
         .unwrap();
-    let second = store::jobs::claim_next(&app.state.db, "w", Duration::from_secs(30), now)
+    let second = store::jobs::claim_next(&app.state.writer, "w", Duration::from_secs(30), now)
         .await
         .unwrap()
         .unwrap();

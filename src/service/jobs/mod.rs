@@ -75,12 +75,13 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<Job
         return Ok(None);
     }
     let now = store::now_ms();
-    for row in store::jobs::fail_exhausted(&state.db, now).await? {
+    for row in store::jobs::fail_exhausted(&state.writer, now).await? {
         tracing::warn!(job = %row.id, state = %row.state, "lease expired with no attempts left");
         metrics::counter!("eyekey_jobs_finished_total", "state" => row.state.clone()).increment(1);
         state.publish(&row);
     }
-    let Some(job) = store::jobs::claim_next(&state.db, &state.instance_id, state.config.queue.lease, now).await? else {
+    let Some(job) = store::jobs::claim_next(&state.writer, &state.instance_id, state.config.queue.lease, now).await?
+    else {
         return Ok(None);
     };
     let id = job.id.clone();
@@ -123,7 +124,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         Err(LoadError::Transient(e)) => return retry_or_fail(state, &job, &format!("{e:#}")).await,
     };
     // Renew the lease once before solving: it may have been cancelled, or lost, while claimed or loading.
-    match store::jobs::heartbeat(&state.db, &job.id, attempt, lease, 0.0).await? {
+    match store::jobs::heartbeat(&state.writer, &job.id, attempt, lease, 0.0).await? {
         None => return Ok(()),
         Some(true) => return end(state, &job, JobState::Cancelled, None).await,
         Some(false) => {}
@@ -164,7 +165,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
             r = &mut solver => break r,
             _ = heartbeat.tick() => {
                 let p = f64::from_bits(progress.load(Ordering::Relaxed));
-                match store::jobs::heartbeat(&state.db, &job.id, attempt, lease, p).await {
+                match store::jobs::heartbeat(&state.writer, &job.id, attempt, lease, p).await {
                     Ok(Some(cancel_requested)) => {
                         if cancel_requested && stop == Stop::None {
                             stop = Stop::Cancel;
@@ -213,7 +214,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
                 bundle_files: serde_json::to_string(&files)?,
                 solve_ms: elapsed.as_millis() as i64,
             };
-            if store::jobs::mark_succeeded(&state.db, &job.id, attempt, &success).await? {
+            if store::jobs::mark_succeeded(&state.writer, &job.id, attempt, &success).await? {
                 metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded")
                     .record(elapsed.as_secs_f64());
                 metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded").increment(1);
@@ -225,7 +226,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         }
         (Ok(Err(_)) | Err(_), Stop::Shutdown) => {
             discard(tmp).await;
-            store::jobs::requeue(&state.db, &job.id, attempt, None, true).await?;
+            store::jobs::requeue(&state.writer, &job.id, attempt, None, true).await?;
             tracing::info!(job = %job.id, "shutting down: job re-queued");
             publish_current(state, &job.id).await;
         }
@@ -253,15 +254,37 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
     Ok(())
 }
 
-/// The part of the evaluation stored with the job: its `summary` member if it has one, else the whole
-/// report when it is small.
-fn summarise(evaluation: &serde_json::Value) -> Option<String> {
-    let v = evaluation.get("summary").unwrap_or(evaluation);
-    if v.is_null() {
-        return None;
+/// The part of the evaluation report stored with the job and shown in every job read: the headline
+/// numbers of each section. Kept: top-level scalars, the `observers` scores, and in each section its
+/// scalars and its `best` entry; dropped: per-person, per-configuration and per-step arrays and long
+/// texts (the full report is `GET /v1/jobs/{id}/evaluation`). Keeps job reads small and fast.
+pub fn summarise(report: &serde_json::Value) -> Option<String> {
+    use serde_json::Value;
+    fn short(v: &Value) -> bool {
+        match v {
+            Value::String(text) => text.len() <= 200,
+            Value::Array(_) | Value::Object(_) => false,
+            _ => true,
+        }
     }
-    let text = serde_json::to_string(v).ok()?;
-    (text.len() <= 64 * 1024).then_some(text)
+    let sections = report.as_object()?;
+    let mut out = serde_json::Map::new();
+    for (key, value) in sections {
+        let kept = match value {
+            Value::Object(fields) => Value::Object(
+                fields
+                    .iter()
+                    .filter(|(name, v)| short(v) || (name.as_str() == "best" && v.is_object()))
+                    .map(|(name, v)| (name.clone(), v.clone()))
+                    .collect(),
+            ),
+            Value::Array(_) if key == "observers" => value.clone(),
+            v if short(v) => v.clone(),
+            _ => continue,
+        };
+        out.insert(key.clone(), kept);
+    }
+    serde_json::to_string(&Value::Object(out)).ok()
 }
 
 async fn publish_current(state: &AppState, id: &str) {
@@ -271,7 +294,7 @@ async fn publish_current(state: &AppState, id: &str) {
 }
 
 async fn end(state: &AppState, job: &JobRow, to: JobState, error: Option<&str>) -> anyhow::Result<()> {
-    if store::jobs::mark_ended(&state.db, &job.id, job.attempts, to, error).await? {
+    if store::jobs::mark_ended(&state.writer, &job.id, job.attempts, to, error).await? {
         metrics::counter!("eyekey_jobs_finished_total", "state" => to.as_str()).increment(1);
         tracing::info!(job = %job.id, attempt = job.attempts, state = to.as_str(), error, "job ended");
         publish_current(state, &job.id).await;
@@ -283,7 +306,7 @@ async fn retry_or_fail(state: &AppState, job: &JobRow, error: &str) -> anyhow::R
     let message = format!("attempt {} of {}: {error}", job.attempts, job.max_attempts);
     if job.attempts < job.max_attempts {
         tracing::warn!(job = %job.id, error = %message, "job attempt failed; re-queued");
-        store::jobs::requeue(&state.db, &job.id, job.attempts, Some(&message), false).await?;
+        store::jobs::requeue(&state.writer, &job.id, job.attempts, Some(&message), false).await?;
         publish_current(state, &job.id).await;
         state.job_queued.notify_one();
         Ok(())
@@ -355,4 +378,36 @@ async fn load_spec(state: &AppState, job: &JobRow) -> Result<JobSpec, LoadError>
         decoy,
         options,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_summary_keeps_headline_numbers_and_drops_long_lists() {
+        let report = serde_json::json!({
+            "metric": "ncc",
+            "threshold": 0.5,
+            "target": {"legibility": 0.9, "readable": true},
+            "observers": [{"label": "o", "legibility": 0.1}],
+            "population": {"count": 20, "readable_fraction": 0.0, "people": [{"legibility": 0.1}]},
+            "camera": {"best": {"legibility": 0.2}, "tried": [{"legibility": 0.2}]},
+            "key_sensitivity": {"optical_bits": 7.5, "optical_legibility": [[0.9]], "method": "x".repeat(500)},
+        });
+        let summary: serde_json::Value = serde_json::from_str(&summarise(&report).unwrap()).unwrap();
+        assert_eq!(
+            summary,
+            serde_json::json!({
+                "metric": "ncc",
+                "threshold": 0.5,
+                "target": {"legibility": 0.9, "readable": true},
+                "observers": [{"label": "o", "legibility": 0.1}],
+                "population": {"count": 20, "readable_fraction": 0.0},
+                "camera": {"best": {"legibility": 0.2}},
+                "key_sensitivity": {"optical_bits": 7.5},
+            })
+        );
+        assert_eq!(summarise(&serde_json::Value::Null), None);
+    }
 }

@@ -157,8 +157,8 @@ pub async fn register_display(
     let geometry_json = serde_json::to_string(&geometry).map_err(|e| ApiError::Internal(e.into()))?;
     let id = id_text(&Uuid::new_v4());
     let token = generate_token(TOKEN_PREFIX);
-    let row = store::displays::insert(&state.db, &id, name, &geometry_json, &token_hash(&token)).await?;
-    store::audit::record(&state.db, OPERATOR, "display.register", &format!("displays/{id}")).await?;
+    let row = store::displays::insert(&state.writer, &id, name, &geometry_json, &token_hash(&token)).await?;
+    store::audit::record(&state.writer, OPERATOR, "display.register", &format!("displays/{id}")).await?;
     Ok((
         StatusCode::CREATED,
         Json(DisplayWithToken {
@@ -231,10 +231,16 @@ pub async fn rotate_token(
 ) -> Result<Json<DisplayWithToken>, ApiError> {
     let id = id_text(&id);
     let token = generate_token(TOKEN_PREFIX);
-    let row = store::displays::rotate_token(&state.db, &id, &token_hash(&token))
+    let row = store::displays::rotate_token(&state.writer, &id, &token_hash(&token))
         .await?
         .ok_or(ApiError::NotFound("display"))?;
-    store::audit::record(&state.db, OPERATOR, "display.rotate_token", &format!("displays/{id}")).await?;
+    store::audit::record(
+        &state.writer,
+        OPERATOR,
+        "display.rotate_token",
+        &format!("displays/{id}"),
+    )
+    .await?;
     Ok(Json(DisplayWithToken {
         display: view(&row)?,
         token,
@@ -258,9 +264,9 @@ pub async fn delete_display(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
-    if !store::displays::delete(&state.db, &id).await? {
+    if !store::displays::delete(&state.writer, &id).await? {
         return Err(ApiError::NotFound("display"));
     }
-    store::audit::record(&state.db, OPERATOR, "display.delete", &format!("displays/{id}")).await?;
+    store::audit::record(&state.writer, OPERATOR, "display.delete", &format!("displays/{id}")).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -154,7 +154,7 @@ pub async fn upload_document(
         .await
         .map_err(|e| ApiError::Internal(e.into()))?;
     let row = store::documents::insert(
-        &state.db,
+        &state.writer,
         &store::documents::NewDocument {
             id: &id,
             sha256: &sha256,
@@ -166,7 +166,7 @@ pub async fn upload_document(
         },
     )
     .await?;
-    store::audit::record(&state.db, OPERATOR, "document.upload", &format!("documents/{id}")).await?;
+    store::audit::record(&state.writer, OPERATOR, "document.upload", &format!("documents/{id}")).await?;
     Ok((StatusCode::CREATED, Json(DocumentView::from(&row))))
 }
 

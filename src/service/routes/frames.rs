@@ -34,7 +34,7 @@ pub fn router() -> Router<AppState> {
 }
 
 /// A succeeded job as its display sees it.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct FrameJob {
     /// Job id.
     pub id: Uuid,
@@ -48,7 +48,7 @@ pub struct FrameJob {
 }
 
 /// A page of frame jobs.
-#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct FrameJobList {
     /// Succeeded jobs, newest first.
     pub items: Vec<FrameJob>,
@@ -151,7 +151,7 @@ pub async fn download_bundle(
     )
     .await?;
     store::audit::record(
-        &state.db,
+        &state.writer,
         &client.actor(),
         "frames.download",
         &format!("jobs/{}/{ZIP_NAME}", job.id),
@@ -184,7 +184,7 @@ pub async fn download_file(
     let dir = state.data_dir().join(job.bundle_path.as_deref().unwrap_or_default());
     let response = stream_file(&dir.join(&name), content_type_of(&name), None, "bundle file").await?;
     store::audit::record(
-        &state.db,
+        &state.writer,
         &client.actor(),
         "frames.download",
         &format!("jobs/{}/files/{name}", job.id),

@@ -102,7 +102,8 @@ pub struct JobView {
     pub options: EncodeOptions,
     /// Last error (of the final attempt when failed, else of an earlier retried attempt).
     pub last_error: Option<String>,
-    /// Summary of the evaluation report once succeeded (the full report: `/v1/jobs/{id}/evaluation`).
+    /// Headline numbers of the evaluation report once succeeded: target, observers, and each section's
+    /// scalars and best case (the full report: `/v1/jobs/{id}/evaluation`).
     #[schema(value_type = Option<Object>)]
     pub evaluation_summary: Option<serde_json::Value>,
     /// Files of the frame bundle once succeeded.
@@ -287,9 +288,9 @@ pub async fn create_job(
         idempotency_key: key,
         request_hash,
     };
-    let (status, row) = match store::jobs::enqueue(db, &new).await? {
+    let (status, row) = match store::jobs::enqueue(&state.writer, &new).await? {
         Enqueued::Created(row) => {
-            store::audit::record(db, OPERATOR, "job.create", &format!("jobs/{}", row.id)).await?;
+            store::audit::record(&state.writer, OPERATOR, "job.create", &format!("jobs/{}", row.id)).await?;
             state.publish(&row);
             state.job_queued.notify_one();
             (StatusCode::CREATED, row)
@@ -395,7 +396,7 @@ pub async fn cancel_job(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
-    let row = store::jobs::request_cancel(&state.db, &id_text(&id))
+    let row = store::jobs::request_cancel(&state.writer, &id_text(&id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
     let status = match row.job_state() {
@@ -408,7 +409,7 @@ pub async fn cancel_job(
             })
         }
     };
-    store::audit::record(&state.db, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
+    store::audit::record(&state.writer, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
     Ok((status, Json(JobView::try_from(&row)?)))
 }

@@ -147,8 +147,8 @@ pub async fn enrol_profile(
 ) -> Result<(StatusCode, Json<ProfileDetail>), ApiError> {
     let plain = check(&body)?;
     let id = id_text(&Uuid::new_v4());
-    let row = store::profiles::insert(&state.db, &state.master_key, &id, body.label.as_deref(), &plain).await?;
-    store::audit::record(&state.db, OPERATOR, "profile.enrol", &format!("profiles/{id}")).await?;
+    let row = store::profiles::insert(&state.writer, &state.master_key, &id, body.label.as_deref(), &plain).await?;
+    store::audit::record(&state.writer, OPERATOR, "profile.enrol", &format!("profiles/{id}")).await?;
     Ok((StatusCode::CREATED, Json(detail(&row, 1, body.profile))))
 }
 
@@ -229,11 +229,11 @@ pub async fn reenrol_profile(
 ) -> Result<Json<ProfileDetail>, ApiError> {
     let plain = check(&body)?;
     let id = id_text(&id);
-    let row = store::profiles::add_version(&state.db, &state.master_key, &id, body.label.as_deref(), &plain)
+    let row = store::profiles::add_version(&state.writer, &state.master_key, &id, body.label.as_deref(), &plain)
         .await?
         .ok_or(ApiError::NotFound("profile"))?;
     store::audit::record(
-        &state.db,
+        &state.writer,
         OPERATOR,
         "profile.reenrol",
         &format!("profiles/{id}/versions/{}", row.current_version),
@@ -262,9 +262,9 @@ pub async fn delete_profile(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
-    if !store::profiles::delete(&state.db, &id).await? {
+    if !store::profiles::delete(&state.writer, &id).await? {
         return Err(ApiError::NotFound("profile"));
     }
-    store::audit::record(&state.db, OPERATOR, "profile.delete", &format!("profiles/{id}")).await?;
+    store::audit::record(&state.writer, OPERATOR, "profile.delete", &format!("profiles/{id}")).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -2,7 +2,7 @@
 
 use sqlx::SqlitePool;
 
-use super::{now_ms, Cursor};
+use super::{now_ms, Cursor, Writer};
 
 /// One audit entry.
 #[derive(Clone, Debug, sqlx::FromRow)]
@@ -20,7 +20,8 @@ pub struct AuditRow {
 }
 
 /// Appends an entry.
-pub async fn record(pool: &SqlitePool, actor: &str, action: &str, resource: &str) -> Result<(), sqlx::Error> {
+pub async fn record(writer: &Writer, actor: &str, action: &str, resource: &str) -> Result<(), sqlx::Error> {
+    let pool = &writer.0;
     sqlx::query("INSERT INTO audit_log (actor, action, resource, created_at) VALUES (?, ?, ?, ?)")
         .bind(actor)
         .bind(action)

@@ -2,7 +2,7 @@
 
 use sqlx::SqlitePool;
 
-use super::{now_ms, Cursor};
+use super::{now_ms, Cursor, Writer};
 
 /// A display row.
 #[derive(Clone, Debug, sqlx::FromRow)]
@@ -27,12 +27,13 @@ const COLUMNS: &str = "id, name, geometry, token_hash, token_rotated_at, deleted
 
 /// Registers a display.
 pub async fn insert(
-    pool: &SqlitePool,
+    writer: &Writer,
     id: &str,
     name: &str,
     geometry_json: &str,
     token_hash: &[u8],
 ) -> Result<DisplayRow, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     sqlx::query_as::<_, DisplayRow>(&format!(
         "INSERT INTO displays (id, name, geometry, token_hash, token_rotated_at, created_at)
@@ -86,7 +87,8 @@ pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Res
 }
 
 /// Replaces the token hash; the old token stops working at once.
-pub async fn rotate_token(pool: &SqlitePool, id: &str, token_hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
+pub async fn rotate_token(writer: &Writer, id: &str, token_hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
+    let pool = &writer.0;
     sqlx::query_as::<_, DisplayRow>(&format!(
         "UPDATE displays SET token_hash = ?, token_rotated_at = ? WHERE id = ? AND deleted_at IS NULL
          RETURNING {COLUMNS}"
@@ -100,7 +102,8 @@ pub async fn rotate_token(pool: &SqlitePool, id: &str, token_hash: &[u8]) -> Res
 
 /// Soft-deletes a display (its token stops working; its jobs keep their history) and cancels its
 /// queued jobs, asking running ones to stop. Returns false if there was no such live display.
-pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
+pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     let mut tx = pool.begin().await?;
     let done = sqlx::query("UPDATE displays SET deleted_at = ? WHERE id = ? AND deleted_at IS NULL")

@@ -2,7 +2,7 @@
 
 use sqlx::SqlitePool;
 
-use super::{now_ms, Cursor};
+use super::{now_ms, Cursor, Writer};
 
 /// A document row.
 #[derive(Clone, Debug, sqlx::FromRow)]
@@ -47,7 +47,8 @@ pub struct NewDocument<'a> {
 }
 
 /// Records an uploaded document whose file is already in place.
-pub async fn insert(pool: &SqlitePool, d: &NewDocument<'_>) -> Result<DocumentRow, sqlx::Error> {
+pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow, sqlx::Error> {
+    let pool = &writer.0;
     sqlx::query_as::<_, DocumentRow>(&format!(
         "INSERT INTO documents (id, sha256, content_type, bytes, width, height, path, created_at)
          VALUES (?, ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"

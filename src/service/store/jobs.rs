@@ -10,7 +10,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use sqlx::SqlitePool;
 
-use super::{now_ms, Cursor};
+use super::{now_ms, Cursor, Writer};
 
 /// Where a job is in its life.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
@@ -174,7 +174,8 @@ pub enum Enqueued {
 }
 
 /// Enqueues a job, honouring its idempotency key.
-pub async fn enqueue(pool: &SqlitePool, job: &NewJob) -> Result<Enqueued, sqlx::Error> {
+pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     // ON CONFLICT DO NOTHING on the unique key makes concurrent identical requests race safely: one
     // inserts, the others see no row returned and read the winner.
@@ -257,7 +258,8 @@ pub async fn list(
 
 /// Asks a job to stop: a queued job is cancelled at once, a running one gets `cancel_requested` (its
 /// worker stops between solver iterations). Returns the job after the change.
-pub async fn request_cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+pub async fn request_cancel(writer: &Writer, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     sqlx::query_as::<_, JobRow>(&format!(
         "UPDATE jobs SET
@@ -275,7 +277,8 @@ pub async fn request_cancel(pool: &SqlitePool, id: &str) -> Result<Option<JobRow
 
 /// Ends running jobs whose lease expired with no attempts left (`failed`, or `cancelled` if a cancel
 /// was asked for), and returns them.
-pub async fn fail_exhausted(pool: &SqlitePool, now: i64) -> Result<Vec<JobRow>, sqlx::Error> {
+pub async fn fail_exhausted(writer: &Writer, now: i64) -> Result<Vec<JobRow>, sqlx::Error> {
+    let pool = &writer.0;
     sqlx::query_as::<_, JobRow>(&format!(
         "UPDATE jobs SET
              state = CASE WHEN cancel_requested = 1 THEN 'cancelled' ELSE 'failed' END,
@@ -294,11 +297,12 @@ pub async fn fail_exhausted(pool: &SqlitePool, now: i64) -> Result<Vec<JobRow>, 
 /// Atomically claims the oldest claimable job: a queued one, or a running one whose lease expired
 /// (its worker died) with attempts left. Sets the lease and counts the attempt.
 pub async fn claim_next(
-    pool: &SqlitePool,
+    writer: &Writer,
     worker_id: &str,
     lease: Duration,
     now: i64,
 ) -> Result<Option<JobRow>, sqlx::Error> {
+    let pool = &writer.0;
     let lease_until = now + lease.as_millis() as i64;
     // One statement, so SQLite's write lock makes the select-and-update atomic: two workers can never
     // claim the same job.
@@ -322,12 +326,13 @@ pub async fn claim_next(
 /// Renews the lease of the caller's attempt and records progress. Returns `None` if the caller no
 /// longer owns the job, else whether a cancel was asked for.
 pub async fn heartbeat(
-    pool: &SqlitePool,
+    writer: &Writer,
     id: &str,
     attempt: i64,
     lease: Duration,
     progress: f64,
 ) -> Result<Option<bool>, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     let row: Option<(bool,)> = sqlx::query_as(
         "UPDATE jobs SET lease_until = ?1, heartbeat_at = ?2, progress = MAX(progress, ?3), updated_at = ?2
@@ -358,7 +363,8 @@ pub struct Success {
 }
 
 /// Marks the caller's attempt succeeded. False if it no longer owned the job.
-pub async fn mark_succeeded(pool: &SqlitePool, id: &str, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
+pub async fn mark_succeeded(writer: &Writer, id: &str, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
         "UPDATE jobs SET state = 'succeeded', progress = 1, evaluation_summary = ?1, bundle_path = ?2,
@@ -379,12 +385,13 @@ pub async fn mark_succeeded(pool: &SqlitePool, id: &str, attempt: i64, s: &Succe
 
 /// Ends the caller's attempt in `failed` or `cancelled`. False if it no longer owned the job.
 pub async fn mark_ended(
-    pool: &SqlitePool,
+    writer: &Writer,
     id: &str,
     attempt: i64,
     state: JobState,
     error: Option<&str>,
 ) -> Result<bool, sqlx::Error> {
+    let pool = &writer.0;
     debug_assert!(matches!(state, JobState::Failed | JobState::Cancelled));
     let now = now_ms();
     let r = sqlx::query(
@@ -405,12 +412,13 @@ pub async fn mark_ended(
 /// Puts the caller's attempt back in the queue. With `refund` the attempt is not counted (the server
 /// is shutting down; the job did nothing wrong). False if it no longer owned the job.
 pub async fn requeue(
-    pool: &SqlitePool,
+    writer: &Writer,
     id: &str,
     attempt: i64,
     error: Option<&str>,
     refund: bool,
 ) -> Result<bool, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
         "UPDATE jobs SET state = 'queued', attempts = attempts - ?1, last_error = COALESCE(?2, last_error),

@@ -20,9 +20,19 @@ use sqlx::SqlitePool;
 /// The migrations in `migrations/`, embedded in the binary.
 pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!();
 
-/// Opens (creating if needed) the database at `path`: WAL journal, a busy timeout so concurrent writers
-/// wait rather than fail, foreign keys on, and `secure_delete` so deleted ciphertexts are overwritten.
-pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
+/// The single connection through which every write goes.
+///
+/// SQLite allows one writer at a time; when several connections write at once, the losers wait in SQLite's
+/// busy handler, which sleeps in steps of milliseconds. Funnelling writes through one connection makes
+/// them queue in the pool instead (fair, no sleeping), while reads use the reader pool and never wait for
+/// writes (WAL). Write functions take a `&Writer`, so a write cannot go through a reader by mistake.
+#[derive(Clone, Debug)]
+pub struct Writer(pub SqlitePool);
+
+/// Opens (creating if needed) the database at `path` as a reader pool and the writer: WAL journal, a busy
+/// timeout (for checkpoints and other processes), foreign keys on, and `secure_delete` so deleted
+/// ciphertexts are overwritten.
+pub async fn connect(path: &Path) -> Result<(SqlitePool, Writer), sqlx::Error> {
     let options = SqliteConnectOptions::from_str("sqlite:")?
         .filename(path)
         .create_if_missing(true)
@@ -31,16 +41,21 @@ pub async fn connect(path: &Path) -> Result<SqlitePool, sqlx::Error> {
         .busy_timeout(Duration::from_secs(10))
         .foreign_keys(true)
         .pragma("secure_delete", "on");
-    SqlitePoolOptions::new()
-        .max_connections(8)
-        .acquire_timeout(Duration::from_secs(10))
-        .connect_with(options)
-        .await
+    let pool = |n: u32| {
+        SqlitePoolOptions::new()
+            .max_connections(n)
+            .acquire_timeout(Duration::from_secs(30))
+            .connect_with(options.clone())
+    };
+    // The writer first: it creates the file and switches it to WAL before the readers open it.
+    let writer = Writer(pool(1).await?);
+    let readers = pool(8).await?;
+    Ok((readers, writer))
 }
 
 /// Applies the embedded migrations.
-pub async fn migrate(pool: &SqlitePool) -> Result<(), sqlx::migrate::MigrateError> {
-    MIGRATOR.run(pool).await
+pub async fn migrate(writer: &Writer) -> Result<(), sqlx::migrate::MigrateError> {
+    MIGRATOR.run(&writer.0).await
 }
 
 /// True when every embedded migration has been applied successfully.
@@ -94,9 +109,10 @@ pub const DEFAULT_PAGE: u32 = 50;
 pub const MAX_PAGE: u32 = 200;
 
 /// The store of a sealed value that proves the master key has not changed since the data was written.
-pub async fn check_master_key(pool: &SqlitePool, key: &super::crypto::MasterKey) -> anyhow::Result<()> {
+pub async fn check_master_key(writer: &Writer, key: &super::crypto::MasterKey) -> anyhow::Result<()> {
     const NAME: &str = "master_key_check";
     const PLAIN: &[u8] = b"eyekey master key check";
+    let pool = &writer.0;
     let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT value FROM settings WHERE name = ?")
         .bind(NAME)
         .fetch_optional(pool)

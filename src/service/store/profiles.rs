@@ -2,7 +2,7 @@
 
 use sqlx::SqlitePool;
 
-use super::{now_ms, Cursor};
+use super::{now_ms, Cursor, Writer};
 use crate::service::crypto::{profile_aad, MasterKey};
 
 /// Metadata of a profile (never its contents).
@@ -52,12 +52,13 @@ const COLUMNS: &str = "id, label, current_version, deleted_at, created_at, updat
 
 /// Enrols a new profile as version 1.
 pub async fn insert(
-    pool: &SqlitePool,
+    writer: &Writer,
     key: &MasterKey,
     id: &str,
     label: Option<&str>,
     profile_json: &[u8],
 ) -> anyhow::Result<ProfileRow> {
+    let pool = &writer.0;
     let now = now_ms();
     let sealed = key.seal(profile_json, &profile_aad(id, 1))?;
     let mut tx = pool.begin().await?;
@@ -86,12 +87,13 @@ pub async fn insert(
 
 /// Re-enrols: adds version `current_version + 1` and makes it current. `None` if no such live profile.
 pub async fn add_version(
-    pool: &SqlitePool,
+    writer: &Writer,
     key: &MasterKey,
     id: &str,
     label: Option<&str>,
     profile_json: &[u8],
 ) -> anyhow::Result<Option<ProfileRow>> {
+    let pool = &writer.0;
     let now = now_ms();
     // The transaction's first statement writes, so it takes SQLite's write lock at once: concurrent
     // re-enrolments serialise and get distinct versions (no read-then-upgrade deadlock).
@@ -167,7 +169,8 @@ pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Res
 /// Deletes a profile: its sealed versions are removed (the keys are gone), the metadata row stays as a
 /// tombstone, and queued jobs that target it are cancelled (running ones are asked to stop).
 /// Returns false if there was no such live profile.
-pub async fn delete(pool: &SqlitePool, id: &str) -> Result<bool, sqlx::Error> {
+pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
+    let pool = &writer.0;
     let now = now_ms();
     let mut tx = pool.begin().await?;
     let done = sqlx::query("UPDATE profiles SET deleted_at = ?, updated_at = ? WHERE id = ? AND deleted_at IS NULL")
