@@ -40,6 +40,9 @@ pub enum Command {
     Experiment(ExperimentCommand),
     /// Run the REST service (embedded SQLite, durable job queue, frame bundles for registered displays).
     Serve(crate::service::ServeArgs),
+    /// Run a display client: fetch this display's newest frame bundle, verify it and install it into
+    /// `<out>/current/`, once or following the server's events.
+    DisplayClient(crate::client::DisplayClientArgs),
 }
 
 /// `eyekey experiment ...`
@@ -355,6 +358,11 @@ pub fn run(cli: Cli) -> Result<()> {
             init_tracing();
             let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
             rt.block_on(crate::service::serve(args))?;
+        }
+        Command::DisplayClient(args) => {
+            init_tracing();
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(crate::client::run(args))?;
         }
         Command::Experiment(ExperimentCommand::Paper { out, max_iterations, population }) => {
             print!("{}", crate::experiment::paper(&out, max_iterations, population)?);

@@ -7,6 +7,7 @@ pub mod bench;
 pub mod bundle;
 pub mod calibration;
 pub mod cli;
+pub mod client;
 pub mod display;
 pub mod encode;
 pub mod evaluate;

@@ -8,6 +8,7 @@
 mod helpers;
 
 mod authorization;
+mod display_client;
 mod displays;
 mod documents;
 mod encryption;
