@@ -90,27 +90,66 @@ def variants(img):
     return res
 
 
+def tesseract(paths):
+    """Texts tesseract reads in each image (whitespace removed); one process for the whole list, falling back
+    to one process per image when it crashes (it can die on degenerate images)."""
+    env = dict(os.environ, OMP_THREAD_LIMIT="1")
+    lst = os.path.join(os.path.dirname(paths[0]), "list.txt")
+    with open(lst, "w") as f:
+        f.write("\n".join(paths) + "\n")
+    r = subprocess.run(["tesseract", lst, "stdout"] + TESS_ARGS, capture_output=True, text=True, env=env)
+    if r.returncode == 0:
+        pages = ["".join(p.split()) for p in r.stdout.split("\f")][: len(paths)]
+        return pages + [""] * (len(paths) - len(pages))
+    if len(paths) == 1:
+        return [""]
+    return [tesseract([p])[0] for p in paths]
+
+
 def ocr_view(job):
-    """OCRs one view; returns (index, read, hits, best_digits, first_hit_variant)."""
+    """OCRs one view; returns (index, read, hits, best_digits, first_hit_variant, variants tried)."""
     index, path, text = job
     img = Image.open(path).convert("L")
     vs = variants(img)
+    pages = [""] * len(vs)
     with tempfile.TemporaryDirectory() as tmp:
-        names = []
+        names, keep = [], []
         for k, (_, v) in enumerate(vs):
+            lo, hi = v.getextrema()
+            if hi - lo < 8:  # blank: nothing to read
+                continue
             n = os.path.join(tmp, f"{k}.png")
             v.save(n)
             names.append(n)
-        lst = os.path.join(tmp, "list.txt")
-        with open(lst, "w") as f:
-            f.write("\n".join(names) + "\n")
-        env = dict(os.environ, OMP_THREAD_LIMIT="1")
-        out = subprocess.run(["tesseract", lst, "stdout"] + TESS_ARGS, capture_output=True, text=True, env=env, check=True).stdout
-    pages = ["".join(p.split()) for p in out.split("\f")][: len(vs)]
-    pages += [""] * (len(vs) - len(pages))
+            keep.append(k)
+        if names:
+            for k, p in zip(keep, tesseract(names)):
+                pages[k] = p
     hits = [vs[k][0] for k, p in enumerate(pages) if p == text]
     best_digits = max(sum(a == b for a, b in zip(p, text)) if len(p) == len(text) else 0 for p in pages)
     return index, bool(hits), len(hits), best_digits, hits[0] if hits else "", len(vs)
+
+
+OBSERVATIONS = """## What this calibration does and does not say
+
+- **OCR is a weaker reader than a person.** Tesseract reads sharp views (legibility ≥ 0.9) every time, but noise
+  defeats it long before it defeats a person: looking at the views, the digits of many views with legibility
+  0.25–0.45 that OCR could not read (decoy-masked views seen by sampled people, and moderately defocused plain
+  views) are recognisable by eye, a few down to about 0.2. Stronger denoising (Gaussian σ up to 3 grid pixels,
+  flat-fielding, binarisation) did not let tesseract read any of them. The threshold is therefore a calibrated
+  lower bound on what an automated attacker reads, not a bound on what a person can read: a claim that a
+  population "cannot read" should also be reported at a stricter threshold (0.2 is a reasonable human bound
+  from these views), and an attacker who knows the font and matches digit templates would do better than OCR.
+- **NCC ranks views well but depends on the document.** OCR success is near zero below 0.5 and rises steeply
+  above it, and no view below the threshold was read. But the same legibility means different readability for
+  different layouts: at equal legibility OCR reads 2 px/dot digits far more often than 1 px/dot digits (table
+  above), and by eye the small digits stay recognisable at lower legibility than OCR manages. The threshold holds
+  for short lines of digits like these PIN slips; other documents (paragraphs of text, images) need their own
+  calibration.
+- **What NCC cannot see.** A view whose digits are legible but shifted, scaled or distorted relative to the
+  document scores low; none of the simulated viewers here shifts the image (tilt is removed, the eye sits at the
+  design position), so this did not arise, but a viewer displaced from the design eye position could produce it.
+"""
 
 
 def logistic_fit(x, y, iters=100):
@@ -135,7 +174,8 @@ def main():
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--command", default="bash benches/calibrate_ocr.sh")
     ap.add_argument("--generate-seconds", type=float, default=float("nan"))
-    ap.add_argument("--current-threshold", type=float, default=float("nan"))
+    ap.add_argument("--reuse", action="store_true", help="re-analyse the OCR results stored in VIEWS/ocr.csv")
+    ap.add_argument("--ocr-seconds", type=float, default=float("nan"), help="with --reuse: OCR time to report")
     args = ap.parse_args()
 
     with open(os.path.join(args.views, "views.csv")) as f:
@@ -145,12 +185,22 @@ def main():
         r["ncc"] = float(r["ncc"])
         r["class"] = r["kind"].split(" ")[0]
     t0 = time.time()
-    jobs = [(k, os.path.join(args.views, r["file"]), r["text"]) for k, r in enumerate(rows)]
-    with ProcessPoolExecutor(max_workers=args.jobs) as ex:
-        for k, read, hits, digits, first, nvar in ex.map(ocr_view, jobs, chunksize=4):
-            rows[k].update(read=read, hits=hits, digits=digits, first=first)
-            n_variants = nvar
-    ocr_seconds = time.time() - t0
+    n_variants = len(variants(Image.open(os.path.join(args.views, rows[0]["file"])).convert("L")))
+    if args.reuse:
+        with open(os.path.join(args.views, "ocr.csv")) as f:
+            done = {r["file"]: r for r in csv.DictReader(f)}
+        for r in rows:
+            d = done[r["file"]]
+            r.update(read=d["read"] == "1", hits=int(d["hits"]), digits=int(d["best_digits"]), first=d["first_variant"])
+        ocr_seconds = args.ocr_seconds
+    else:
+        jobs = [(k, os.path.join(args.views, r["file"]), r["text"]) for k, r in enumerate(rows)]
+        with ProcessPoolExecutor(max_workers=args.jobs) as ex:
+            for k, read, hits, digits, first, _ in ex.map(ocr_view, jobs, chunksize=4):
+                rows[k].update(read=read, hits=hits, digits=digits, first=first)
+                if (k + 1) % 50 == 0:
+                    print(f"OCR: {k + 1}/{len(jobs)} views, {time.time() - t0:.0f} s", flush=True)
+        ocr_seconds = time.time() - t0
     with open(os.path.join(args.views, "ocr.csv"), "w", newline="") as f:
         wr = csv.writer(f)
         wr.writerow(["file", "text", "legibility", "ncc", "kind", "read", "hits", "best_digits", "first_variant"])
@@ -193,9 +243,10 @@ def main():
         fp = int(((read == 0) & ~below).sum())
         return fn, int(below.sum()), fp, int((~below).sum())
 
-    # The chosen threshold: the logistic 50 % point, rounded down to 0.01 (never less conservative than it).
-    fallback = bin50 if not math.isnan(bin50) else ever
-    chosen = math.floor((p50 if 0.0 < p50 < 1.0 else fallback) * 100) / 100
+    # The chosen threshold: the lowest legibility at which the OCR attacker read any view, rounded down to 0.01.
+    # A secrecy judge must not call readable views unreadable, so it sits at the bottom of OCR's range, not at
+    # its 50 % point.
+    chosen = math.floor(ever * 100) / 100
     fn, nb, fp, na = rates(chosen)
 
     # Markdown.
@@ -210,11 +261,12 @@ def main():
     w(f"- `{args.command}` builds the release binary, runs `eyekey experiment calibrate` "
       f"(source: `src/calibration.rs`), then `benches/calibrate_ocr.py` on its output.")
     w("- Views: a random 4-digit PIN (the 5×7 bitmap font, one line, at 2 px per font dot so that the digits fill "
-      "the width, or at 1 px per dot like the experiments' PIN slips) on a 48×48-hole display with the `secure` "
-      "preset's optics (9×9 views, 0.3 mm pitch, 500 mm). Kinds: `plain` — the PIN on an ordinary 2D display "
+      "the width but for a 4 px margin, or at 1 px per dot like the experiments' PIN slips) on a 56×56-hole "
+      "display with the `secure` preset's optics (9×9 views, 0.3 mm pitch, 500 mm); the retinal grid has one "
+      "pixel per hole. Kinds: `plain` — the PIN on an ordinary 2D display "
       "seen by sampled people with an uncorrected defocus of up to ±2 D; `target`, `person`, `camera` — the PIN "
       "encoded by the multiplex encoder (0, 2, 6 or 12 population decoys showing noise masks, decoy weight 0.1, "
-      "0.3 or 1.0, 100 solver iterations, 8 sub-rays) seen by its target, by people sampled from the population "
+      "0.3 or 1.0, 100 solver iterations, 8 sub-rays) seen (12 sub-rays) by its target, by people sampled from the population "
       "statistics, and by an ideal eye with standard cones and a 4 mm aperture focused within ±1 D. Every view "
       "uses a sub-ray jitter seed different from the encoder's.")
     w("- Each view is scored by `Reference::score` and written as an attacker's starting picture: luminance "
@@ -226,7 +278,7 @@ def main():
       "in both polarities, at 2, 3, 4, 6 and 8 output pixels per grid pixel, with a white border. A view counts as **read** "
       "when ANY variant returns exactly the true 4 digits: the attacker's best case.")
     w(f"- {n} views; generating them took {args.generate_seconds:.0f} s and OCR {ocr_seconds:.0f} s "
-      f"({args.jobs} workers) on this 2-core machine.\n")
+      f"({args.jobs} workers) on a 2-core machine shared with other builds.\n")
     w("## Results\n")
     w("| legibility | views | read by OCR | OCR success | mean digits right (best variant) | views (read) by kind |")
     w("| --- | --- | --- | --- | --- | --- |")
@@ -244,17 +296,16 @@ def main():
       "positive, one judged readable that OCR could not read):\n")
     w("| threshold | views below | of them read by OCR (false negatives) | views at or above | of them not read (false positives) |")
     w("| --- | --- | --- | --- | --- |")
-    cands = sorted(set([round(x, 2) for x in (0.3, 0.4, 0.5, 0.6, 0.7, chosen, bin50, p10)] if not math.isnan(bin50) else [0.3, 0.4, 0.5, 0.6, 0.7, chosen, p10]))
+    cands = sorted({round(x, 2) for x in (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, chosen, bin50, p10, p50) if not math.isnan(x)})
     for t in cands:
-        if math.isnan(t):
-            continue
         f1, n1, f2, n2 = rates(t)
         mark = " (chosen)" if abs(t - chosen) < 1e-9 else ""
         w(f"| {t:.2f}{mark} | {n1} | {f1} ({100 * f1 / max(n1, 1):.1f} %) | {n2} | {f2} ({100 * f2 / max(n2, 1):.1f} %) |")
     w("")
     w("## Threshold\n")
-    w(f"`DEFAULT_THRESHOLD` = **{chosen:.2f}**: the legibility at which the logistic fit gives OCR a 50 % chance, "
-      "rounded down to 0.01. "
+    w(f"`DEFAULT_THRESHOLD` = **{chosen:.2f}**: the lowest legibility at which the OCR attacker read any view, "
+      "rounded down to 0.01. A secrecy judge has to err towards *readable*: a threshold at OCR's 50 % point "
+      f"({p50:.2f}) would call views unreadable that OCR reads up to half the time. "
       f"Below it, OCR read {fn} of {nb} views ({100 * fn / max(nb, 1):.1f} %); at or above it, OCR failed on "
       f"{fp} of {na} ({100 * fp / max(na, 1):.1f} %).\n")
     per_kind = {}
@@ -268,6 +319,18 @@ def main():
         below = sum(1 for r in rs if r["read"] and r["legibility"] < chosen)
         w(f"| {c} | {len(rs)} | {sum(r['read'] for r in rs)} | {min(ls):.2f}–{max(ls):.2f} | {below} |")
     w("")
+    w("By text size (pixels per font dot on the retinal grid), OCR success per legibility bin:\n")
+    sizes = sorted({r["kind"].split("scale=")[-1] for r in rows})
+    w("| legibility | " + " | ".join(f"{z} px/dot: read / views" for z in sizes) + " |")
+    w("| --- |" + " --- |" * len(sizes))
+    for lo in range(10):
+        cells = []
+        for z in sizes:
+            sel = [r for r in rows if r["kind"].split("scale=")[-1] == z and lo / 10 <= r["legibility"] < (lo + 1) / 10 + (lo == 9)]
+            cells.append(f"{sum(r['read'] for r in sel)} / {len(sel)}")
+        w(f"| {lo / 10:.1f}–{(lo + 1) / 10:.1f} | " + " | ".join(cells) + " |")
+    w("")
+    w(OBSERVATIONS)
     md = "\n".join(L) + "\n"
     if os.path.dirname(args.out):
         os.makedirs(os.path.dirname(args.out), exist_ok=True)
