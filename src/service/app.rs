@@ -7,6 +7,7 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
+use axum::serve::ListenerExt as _;
 use axum::Router;
 use tokio::net::TcpListener;
 use tokio::sync::{broadcast, watch, Notify};
@@ -157,6 +158,13 @@ impl Application {
             signal_shutdown.shutdown();
         });
         let mut stopped = state.shutdown.clone();
+        // TCP_NODELAY: a streamed body goes out in several writes, and Nagle's algorithm with the client's
+        // delayed ACK would hold each response's last segment for ~40 ms.
+        let listener = listener.tap_io(|tcp| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::debug!(error = %e, "could not set TCP_NODELAY");
+            }
+        });
         axum::serve(listener, router)
             .with_graceful_shutdown(async move {
                 super::state::stopped(&mut stopped).await;
