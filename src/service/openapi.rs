@@ -17,7 +17,9 @@ use super::routes;
         description = "Shows a document on a light-field display so that only one enrolled person can read it. \
             Operators (operator token) enrol vision profiles, register displays, upload documents, run encoding \
             jobs and read their evaluation; each display client (its own token) fetches the frame bundles of its \
-            own jobs. Every error body is `{\"error\": {\"code\", \"message\", \"field\"}}`."
+            own jobs. A missing or unknown token gets 401; a display token on an operator route, or the operator \
+            token on a display route, gets 403; another display's job is a 404 to a display. Every error body \
+            is `{\"error\": {\"code\", \"message\", \"field\"}}`."
     ),
     paths(
         routes::health::healthz,
