@@ -170,6 +170,9 @@ pub struct EncodeArgs {
     /// Also make the target read from eye positions this far off axis, mm (head movement).
     #[arg(long)]
     pub head_radius: Option<f64>,
+    /// Adaptive decoy rounds: add sampled people who can still read as decoys and solve again.
+    #[arg(long)]
+    pub adaptive_rounds: Option<u32>,
     /// Output bundle directory (must not exist).
     #[arg(long)]
     pub out: PathBuf,
@@ -501,6 +504,8 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         lambda_c: a.lambda_c.unwrap_or(d.lambda_c),
         evaluation_population: 0,
         head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
+        adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
+        ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {
         bail!("--decoy-kind image needs --decoy IMAGE");

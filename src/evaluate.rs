@@ -258,6 +258,9 @@ pub struct PopulationSummary {
     pub p95_legibility: f64,
     /// Highest legibility.
     pub max_legibility: f64,
+    /// Fraction of people at or above each of several legibility levels, as (level, fraction): a reader
+    /// better than OCR (a person who knows the font) reads below the calibrated threshold.
+    pub fraction_at_or_above: Vec<(f64, f64)>,
     /// Every person's score.
     pub people: Vec<ViewScore>,
 }
@@ -441,6 +444,10 @@ pub fn evaluate(
             median_legibility: percentile(&legs, 0.5),
             p95_legibility: percentile(&legs, 0.95),
             max_legibility: legs.last().copied().unwrap_or(0.0),
+            fraction_at_or_above: [0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6]
+                .iter()
+                .map(|&t| (t, legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64))
+                .collect(),
             people: scores,
         })
     } else {

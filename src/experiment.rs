@@ -274,7 +274,7 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
         crate::population::sample_person(&mut rng, crate::population::SamplingScope { pupil_spread: false, ..Default::default() })
     };
-    let base = |label: &str| (label.to_string(), sweep_display(7, 0.3, 500.0, 32, 4), 6.0, 6u32, DecoyKind::Noise, 0.3);
+    let base = |label: &str| (label.to_string(), sweep_display(7, 0.3, 500.0, 32, 4), 6.0, 6u32, DecoyKind::Noise, 0.3, 0u32);
     let mut configs = vec![base("baseline: 7×7 views, 0.3 mm, 500 mm, 4 bands, 6 noise decoys w=0.3")];
     for v in [3u32, 5, 9] {
         let mut c = base(&format!("views {v}×{v}"));
@@ -319,9 +319,22 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
         c.5 = 0.2;
         configs.push(c);
     }
+    {
+        let mut c = base("9×9 views, 12 decoys w=0.2, 2 adaptive rounds");
+        c.1 = sweep_display(9, 0.3, 500.0, 32, 4);
+        c.3 = 12;
+        c.5 = 0.2;
+        c.6 = 2;
+        configs.push(c);
+    }
+    {
+        let mut c = base("7×7 views, 6 decoys w=0.3, 2 adaptive rounds");
+        c.6 = 2;
+        configs.push(c);
+    }
     let cancel = AtomicBool::new(false);
     let mut points = Vec::new();
-    for (label, display, pupil, decoys, decoy, weight) in configs {
+    for (label, display, pupil, decoys, decoy, weight, adaptive_rounds) in configs {
         let t = Instant::now();
         let g = (display.holes_x * 4, display.holes_y * 4);
         let document = pin_slip(g.0, g.1);
@@ -345,6 +358,9 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
                 max_iterations,
                 sub_rays: 12,
                 seed: 5,
+                adaptive_rounds,
+                adaptive_candidates: 32,
+                adaptive_per_round: 6,
                 ..Default::default()
             },
         };
@@ -492,11 +508,22 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     let mut md = String::new();
     writeln!(md, "| quantity | value |\n| --- | --- |")?;
     writeln!(md, "| display | `secure` preset: {}×{} holes at {} mm, {}×{} views, {} bands |", display.holes_x, display.holes_y, display.hole_pitch_mm, display.views_u, display.views_v, display.n_bands())?;
-    writeln!(md, "| encoder | multiplex, {} population decoys (noise masks), decoy weight {} |", options.population_decoys, options.decoy_weight)?;
+    writeln!(
+        md,
+        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, {} adaptive rounds of {} candidates (decoys added: {}) |",
+        options.population_decoys,
+        options.decoy_weight,
+        options.adaptive_rounds,
+        options.adaptive_candidates,
+        enc.solver["adaptive_decoys_added"]
+    )?;
     writeln!(md, "| target legibility / PSNR / SSIM | {:.2} / {:.1} dB / {:.2} |", r.target.legibility, r.target.psnr_db, r.target.ssim)?;
     if let Some(p) = &r.population {
         writeln!(md, "| sampled people who can read | {} of {} ({:.1} %) |", p.readable_count, p.count, 100.0 * p.readable_fraction)?;
         writeln!(md, "| population legibility median / 95th pct / max | {:.2} / {:.2} / {:.2} |", p.median_legibility, p.p95_legibility, p.max_legibility)?;
+        let levels: Vec<String> =
+            p.fraction_at_or_above.iter().map(|(t, f)| format!("≥ {t:.2}: {:.1} %", 100.0 * f)).collect();
+        writeln!(md, "| population at or above legibility levels | {} |", levels.join(", "))?;
     }
     if let Some(c) = &r.camera {
         writeln!(md, "| camera attacker's best | {:.2} ({}) |", c.best.legibility, c.best.label)?;
@@ -516,5 +543,13 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
 
 /// The encoder options paired with the `secure` preset (chosen from the sweep's frontier).
 pub fn secure_encode_options() -> EncodeOptions {
-    EncodeOptions { population_decoys: 12, decoy_weight: 0.2, max_iterations: 300, ..Default::default() }
+    EncodeOptions {
+        population_decoys: 12,
+        decoy_weight: 0.2,
+        max_iterations: 300,
+        adaptive_rounds: 2,
+        adaptive_candidates: 32,
+        adaptive_per_round: 6,
+        ..Default::default()
+    }
 }

@@ -79,6 +79,13 @@ pub struct EncodeOptions {
     /// positions this far off axis (mm; 0 = only the design position). Stacked observers, as in the
     /// 2014 eyeglasses-free display.
     pub head_radius_mm: f64,
+    /// Adaptive decoy rounds: after each solve, sample `adaptive_candidates` fresh people and add up to
+    /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
+    pub adaptive_rounds: u32,
+    /// People sampled per adaptive round.
+    pub adaptive_candidates: u32,
+    /// Decoys added per adaptive round at most.
+    pub adaptive_per_round: u32,
 }
 
 impl Default for EncodeOptions {
@@ -97,6 +104,9 @@ impl Default for EncodeOptions {
             lambda_c: 0.05,
             evaluation_population: 20,
             head_radius_mm: 0.0,
+            adaptive_rounds: 0,
+            adaptive_candidates: 24,
+            adaptive_per_round: 4,
         }
     }
 }
@@ -180,6 +190,12 @@ impl EncodeOptions {
         }
         if !(self.head_radius_mm.is_finite() && (0.0..=20.0).contains(&self.head_radius_mm)) {
             return bad("head_radius_mm", format!("must be within 0..=20 mm, got {}", self.head_radius_mm));
+        }
+        if self.adaptive_rounds > 5 || self.adaptive_candidates > 200 || self.adaptive_per_round > 16 {
+            return bad(
+                "adaptive_rounds",
+                "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
+            );
         }
         if self.evaluation_population > 2000 {
             return bad("evaluation_population", format!("at most 2000, got {}", self.evaluation_population));
@@ -286,68 +302,149 @@ pub fn encode(
             moved.push(Observer::new(d, &spec.target, eye, &base).map_err(internal)?);
         }
     }
-    let mut terms = vec![Term { observer: &target, objective: target_obj.clone(), weight: 1.0 }];
-    for m in &moved {
-        terms.push(Term { observer: m, objective: target_obj.clone(), weight: 0.25 });
-    }
-    for (k, obs) in others.iter().enumerate() {
-        let decoy_img = match (o.decoy, &spec.decoy) {
-            (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
-            (DecoyKind::Image, Some(img)) => img.clone(),
-            _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
-        };
-        terms.push(Term { observer: obs, objective: obs.objective(&decoy_img, OBJECTIVE_LEVEL), weight: o.decoy_weight });
-    }
-    let data = MultiplexObjective::new(terms, d.n_bands(), energy, 1e-4);
-    let dm;
-    let objective: &dyn Objective = if diffmax {
-        dm = DiffMaxObjective::new(data, &target, o.lambda_w, o.lambda_c);
-        &dm
-    } else {
-        &data
+    let decoy_for = |k: usize| match (o.decoy, &spec.decoy) {
+        (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
+        (DecoyKind::Image, Some(img)) => img.clone(),
+        _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
     };
+    let mut decoy_objectives: Vec<Vec<f32>> =
+        others.iter().enumerate().map(|(k, obs)| obs.objective(&decoy_for(k), OBJECTIVE_LEVEL)).collect();
     let solver_opts = SolverOptions { max_iterations: o.max_iterations, tolerance: o.tolerance, ..Default::default() };
-    let max_it = o.max_iterations as f64;
-    let mut report = |p: crate::solve::Progress| progress(0.15 + 0.7 * p.iteration as f64 / max_it);
+    let rounds = if matches!(o.method, Method::Diffmax) { 0 } else { o.adaptive_rounds };
+    let total_its = o.max_iterations as f64 * (rounds + 1) as f64;
     let l_max = d.l_max as f32;
+    let tied = o.ablation == Some(Ablation::Spectral);
     // Warm start: the document shown plainly at the objective level.
     let plain = crate::observer::plain_light_field_for_image(d, &spec.document);
-    let (l, result) = if o.ablation == Some(Ablation::Spectral) {
-        let tied = TiedViews::new(objective, d);
-        let n = d.n_bands();
-        let x0: Vec<f32> = (0..(d.holes_x * d.holes_y) as usize * n)
+    let n = d.n_bands();
+    let mut x: Vec<f32> = if tied {
+        (0..(d.holes_x * d.holes_y) as usize * n)
             .map(|h| {
                 let (hx, hy) = ((h / n) as u32 % d.holes_x, (h / n) as u32 / d.holes_x);
                 plain[d.sample_index(hx, hy, 0, 0) * n + h % n] * OBJECTIVE_LEVEL as f32
             })
-            .collect();
-        let r = minimise(&tied, x0, 0.0, l_max, &solver_opts, &mut report, cancel);
-        (tied.expand(&r.x), r)
+            .collect()
     } else {
-        let x0: Vec<f32> = plain.iter().map(|v| v * OBJECTIVE_LEVEL as f32).collect();
-        let r = minimise(objective, x0, 0.0, l_max, &solver_opts, &mut report, cancel);
-        (r.x.clone(), r)
+        plain.iter().map(|v| v * OBJECTIVE_LEVEL as f32).collect()
     };
-    if result.termination == crate::solve::Termination::Cancelled {
-        return Err(PipelineError::Cancelled);
+    let mut history = Vec::new();
+    let (mut iterations, mut restarts, mut seconds) = (0u32, 0u32, 0.0f64);
+    let mut last = None;
+    let mut added_per_round = Vec::new();
+    let reference = crate::evaluate::Reference::new(
+        &spec.document,
+        g.width,
+        g.height,
+        OBJECTIVE_LEVEL,
+        crate::evaluate::DEFAULT_THRESHOLD,
+    );
+    for round in 0..=rounds {
+        let done_before = iterations as f64;
+        let mut report = |p: crate::solve::Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_its);
+        let result = {
+            let mut terms = vec![Term { observer: &target, objective: target_obj.clone(), weight: 1.0 }];
+            for m in &moved {
+                terms.push(Term { observer: m, objective: target_obj.clone(), weight: 0.25 });
+            }
+            for (obs, obj) in others.iter().zip(&decoy_objectives) {
+                terms.push(Term { observer: obs, objective: obj.clone(), weight: o.decoy_weight });
+            }
+            let data = MultiplexObjective::new(terms, n, energy, 1e-4);
+            let dm;
+            let objective: &dyn Objective = if diffmax {
+                dm = DiffMaxObjective::new(data, &target, o.lambda_w, o.lambda_c);
+                &dm
+            } else {
+                &data
+            };
+            if tied {
+                let t = TiedViews::new(objective, d);
+                minimise(&t, x.clone(), 0.0, l_max, &solver_opts, &mut report, cancel)
+            } else {
+                minimise(objective, x.clone(), 0.0, l_max, &solver_opts, &mut report, cancel)
+            }
+        };
+        if result.termination == crate::solve::Termination::Cancelled {
+            return Err(PipelineError::Cancelled);
+        }
+        if result.termination == crate::solve::Termination::NumericalFailure {
+            return Err(PipelineError::Internal("the solver's objective became non-finite".into()));
+        }
+        iterations += result.iterations;
+        restarts += result.restarts;
+        seconds += result.seconds;
+        history.extend_from_slice(&result.history);
+        x = result.x.clone();
+        last = Some(result);
+        if round == rounds {
+            break;
+        }
+        // Adaptive decoys: sample fresh candidates (a seed stream the evaluation never uses), and add as decoy
+        // observers the ones who can still read, most legible first.
+        let l_now = if tied { TiedViews::new(&DummyDim(x.len()), d).expand(&x) } else { x.clone() };
+        let candidates = crate::population::sample_population(
+            o.adaptive_candidates as usize,
+            o.seed.wrapping_add(7_000 + 1_000 * round as u64),
+            Default::default(),
+        );
+        let mut scored = Vec::new();
+        for p in &candidates {
+            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(PipelineError::Cancelled);
+            }
+            let mut obs = Observer::new(d, p, EyePosition::default(), &base).map_err(internal)?;
+            if o.ablation == Some(Ablation::Optical) {
+                obs = Observer::with_coupling(obs.transport.clone(), target.coupling_f64.clone(), d.l_max);
+            }
+            let legibility = reference.score_observer("candidate", &obs, &l_now).0.legibility;
+            scored.push((legibility, obs));
+        }
+        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut added = 0;
+        for (legibility, obs) in scored.into_iter().take(o.adaptive_per_round as usize) {
+            if legibility < 0.8 * reference.threshold {
+                break;
+            }
+            let k = others.len();
+            decoy_objectives.push(obs.objective(&decoy_for(k), OBJECTIVE_LEVEL));
+            others.push(obs);
+            added += 1;
+        }
+        added_per_round.push(added);
+        if added == 0 {
+            break;
+        }
     }
-    if result.termination == crate::solve::Termination::NumericalFailure {
-        return Err(PipelineError::Internal("the solver's objective became non-finite".into()));
-    }
+    let result = last.expect("at least one round ran");
+    let l = if tied { TiedViews::new(&DummyDim(x.len()), d).expand(&x) } else { x };
     progress(0.85);
     let solver = serde_json::json!({
         "algorithm": "FISTA with gradient restart, step 1/L (power iteration)",
-        "iterations": result.iterations,
-        "restarts": result.restarts,
+        "iterations": iterations,
+        "restarts": restarts,
         "termination": result.termination,
         "objective": result.objective,
-        "objective_history": result.history,
+        "objective_history": history,
         "lipschitz": result.lipschitz,
-        "seconds": result.seconds,
-        "observers": others.len() + 1,
+        "seconds": seconds,
+        "observers": others.len() + 1 + moved.len(),
+        "adaptive_decoys_added": added_per_round,
         "unknowns": l.len(),
     });
     Ok(Encoded { light_field: l, solver })
+}
+
+/// A stand-in objective used only to reach [`TiedViews::expand`], which needs no objective.
+struct DummyDim(usize);
+
+impl crate::solve::Objective for DummyDim {
+    fn dim(&self) -> usize {
+        self.0
+    }
+    fn value_and_gradient(&self, _: &[f32], grad: &mut [f32]) -> f64 {
+        grad.iter_mut().for_each(|g| *g = 0.0);
+        0.0
+    }
 }
 
 /// Runs one job and writes its bundle (frames, barrier mask, manifest) and evaluation into `out_dir`.
