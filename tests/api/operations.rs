@@ -11,7 +11,25 @@ async fn health_and_readiness_answer_without_a_token() {
     )
     .await;
     assert_eq!(health["status"], "ok");
-    let ready = expect_json(app.client.get(app.url("/readyz")).send().await.unwrap(), StatusCode::OK).await;
+    let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(
+        r.headers()["x-request-id"].len(),
+        36,
+        "every response carries a request id"
+    );
+    let ready = expect_json(r, StatusCode::OK).await;
+    let r = app
+        .client
+        .get(app.url("/healthz"))
+        .header("x-request-id", "trace-me-42")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        r.headers()["x-request-id"],
+        "trace-me-42",
+        "a client's request id is kept"
+    );
     assert_eq!(ready["status"], "ready");
 }
 
