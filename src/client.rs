@@ -22,6 +22,9 @@
 //!
 //! Only the newest job is ever shown: a job that finished after a newer one had already been installed is
 //! skipped, since it holds an older document.
+//!
+//! Run one client per output directory: at start-up it removes the temporary entries a previous run left
+//! behind there.
 
 use std::future::Future;
 use std::io::{Read as _, Write as _};
@@ -491,7 +494,7 @@ async fn get(
     }
     let response = request.send().await.map_err(|e| ClientError::Unreachable {
         url: url.clone(),
-        reason: error_chain(&e),
+        reason: error_chain(&e.without_url()),
     })?;
     let status = response.status();
     if status.is_success() {
@@ -525,7 +528,7 @@ pub async fn newest_job(cfg: &ClientConfig) -> Result<Option<FrameJob>, ClientEr
     let response = get(cfg, path, Some(REQUEST_TIMEOUT), On404::NoApi).await?;
     let list: FrameJobList = response.json().await.map_err(|e| ClientError::Protocol {
         url: cfg.url(path),
-        reason: format!("not a frame-job list: {}", error_chain(&e)),
+        reason: format!("not a frame-job list: {}", error_chain(&e.without_url())),
     })?;
     // The list is newest first.
     Ok(list.items.into_iter().next())
@@ -602,7 +605,7 @@ async fn download_bundle(cfg: &ClientConfig, job: &FrameJob) -> Result<tempfile:
     while let Some(chunk) = stream.next().await {
         let chunk = chunk.map_err(|e| ClientError::Unreachable {
             url: url.clone(),
-            reason: error_chain(&e),
+            reason: error_chain(&e.without_url()),
         })?;
         total += chunk.len() as u64;
         if total > MAX_DOWNLOAD_BYTES {
@@ -873,7 +876,7 @@ async fn wait_for_event(cfg: &ClientConfig) -> Result<Wake, ClientError> {
         tokio::select! {
             chunk = stream.next() => match chunk {
                 None => return Ok(Wake::StreamClosed),
-                Some(Err(e)) => return Err(ClientError::Unreachable { url, reason: error_chain(&e) }),
+                Some(Err(e)) => return Err(ClientError::Unreachable { url, reason: error_chain(&e.without_url()) }),
                 Some(Ok(bytes)) => {
                     if let Some(ev) = parser.push(&bytes).into_iter().find(|ev| ev.event == "job_succeeded") {
                         tracing::debug!(data = %ev.data, "a job succeeded");

@@ -108,6 +108,34 @@ async fn display_client_once_downloads_verifies_and_writes_current_frames() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn display_client_refuses_a_corrupted_bundle_and_keeps_showing_the_last_good_one() {
+    let app = spawn_app_with(|c| c.workers = 1).await;
+    let f = app.fixtures().await;
+    let good = finished_job(&app, &f).await;
+    let out = tempfile::tempdir().unwrap();
+    let cfg = client(&app, &f.display_token, out.path());
+    sync_once(&cfg).await.unwrap();
+
+    // The next bundle is damaged on the server's disk: one byte in the middle of the zip (frame data).
+    let bad = finished_job(&app, &f).await;
+    let zip = app.data_dir.join("jobs").join(bad.to_string()).join("bundle.zip");
+    let mut bytes = std::fs::read(&zip).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x55;
+    std::fs::write(&zip, bytes).unwrap();
+
+    let err = sync_once(&cfg).await.unwrap_err();
+    assert!(matches!(err, ClientError::Bundle { job, .. } if job == bad), "{err:?}");
+    assert!(
+        err.is_retryable(),
+        "a download may be damaged in transit: it is tried again"
+    );
+    assert_eq!(read_state(out.path()).current.map(|c| c.job_id), Some(good));
+    assert_current_is_a_verified_bundle(out.path());
+    assert!(!out.path().join("previous").exists(), "nothing was swapped");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn display_client_writes_what_the_given_person_sees_as_a_preview() {
     let app = spawn_app_with(|c| c.workers = 1).await;
     let f = app.fixtures().await;
