@@ -196,9 +196,9 @@ impl BenchProblem {
                 for e in m.indptr[r] as usize..m.indptr[r + 1] as usize {
                     let (c, v) = (m.indices[e] as usize, m.values[e] as f64);
                     for (band, cn) in o.coupling_f64.iter().enumerate() {
-                        for a in 0..3 {
-                            if cn[a] != 0.0 {
-                                entries.push((row0 + r * 3 + a, c * n + band, scale * v * cn[a]));
+                        for (a, ca) in cn.iter().enumerate() {
+                            if *ca != 0.0 {
+                                entries.push((row0 + r * 3 + a, c * n + band, scale * v * ca));
                             }
                         }
                     }

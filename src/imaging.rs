@@ -238,9 +238,9 @@ mod tests {
     fn invert3_inverts() {
         let m = [[2.0, 1.0, 0.0], [0.5, 3.0, 1.0], [0.0, 1.0, 4.0]];
         let inv = invert3(m).unwrap();
-        for i in 0..3 {
+        for (i, row) in m.iter().enumerate() {
             for j in 0..3 {
-                let s: f64 = (0..3).map(|k| m[i][k] * inv[k][j]).sum();
+                let s: f64 = row.iter().zip(&inv).map(|(a, inv_row)| a * inv_row[j]).sum();
                 assert!((s - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
             }
         }
