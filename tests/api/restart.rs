@@ -69,3 +69,25 @@ async fn a_job_running_at_shutdown_completes_exactly_once_after_restart() {
         .unwrap();
     assert_eq!(succeeded.0, 1);
 }
+
+/// A worker that dies without a word (a crashed process) holds its lease until it expires; then a
+/// live worker claims the job again and finishes it. Runs the real encoder.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_abandoned_by_a_crashed_worker_is_finished_by_another_after_its_lease() {
+    use eyekey::service::store;
+    let dir = tempfile::tempdir().unwrap();
+    let app = spawn_app_in(dir.path(), |_| {}).await;
+    let f = app.fixtures().await;
+    let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
+    let lease = Duration::from_millis(300);
+    let claimed = store::jobs::claim_next(&app.state.writer, "crashed-worker", lease, store::now_ms())
+        .await
+        .unwrap();
+    assert_eq!(claimed.map(|j| j.id), Some(id.clone()));
+    app.stop().await;
+
+    let app = spawn_app_in(dir.path(), |c| c.workers = 1).await;
+    let job = app.wait_for_terminal(&id, Duration::from_secs(60)).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    assert_eq!(job["attempts"], 2, "the crashed attempt counts");
+}
