@@ -18,7 +18,7 @@ pub mod observer;
 pub mod optics;
 pub mod pipeline;
 pub mod population;
+pub mod service;
 pub mod solve;
 pub mod spectral;
 pub mod transport;
-pub mod service;
