@@ -341,10 +341,10 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Example(ExampleCommand::Display { preset }) => {
             let d = DisplayGeometry::preset(&preset)?;
-            println!("{}", serde_json::to_string_pretty(&d)?);
+            print_stdout(&serde_json::to_string_pretty(&d)?)?;
         }
         Command::Example(ExampleCommand::Profile(a)) => {
-            println!("{}", serde_json::to_string_pretty(&example_profile(&a)?)?);
+            print_stdout(&serde_json::to_string_pretty(&example_profile(&a)?)?)?;
         }
         Command::Example(ExampleCommand::Document { text, width, height, scale, out }) => {
             if !(8..=4096).contains(&width) || !(8..=4096).contains(&height) {
@@ -678,4 +678,14 @@ fn init_tracing() {
     } else {
         builder.try_init()
     };
+}
+
+/// Prints a line on stdout; a reader that went away (`eyekey example display | head`) is not an error.
+fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|_| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
 }
