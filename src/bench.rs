@@ -23,7 +23,10 @@ pub fn peak_memory_bytes() -> u64 {
         .ok()
         .and_then(|s| {
             s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace().nth(1).and_then(|kb| kb.parse::<u64>().ok()).map(|kb| kb * 1024)
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|kb| kb.parse::<u64>().ok())
+                    .map(|kb| kb * 1024)
             })
         })
         .unwrap_or(0)
@@ -75,7 +78,10 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
     p.zernike_um[7] = 0.15;
     p.zernike_um[12] = 0.1;
     let w = p.effective_wavefront()?;
-    let opts = TransportOptions { sub_rays, ..Default::default() };
+    let opts = TransportOptions {
+        sub_rays,
+        ..Default::default()
+    };
     // Build (best of 3; the first run also pays page faults).
     let mut t_matrix = None;
     let build = time_best(3, || {
@@ -108,7 +114,10 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
     )?;
     writeln!(out, "| sub-rays per sample (S) | {sub_rays} |")?;
     writeln!(out, "| rayon threads | {} |", rayon::current_num_threads())?;
-    writeln!(out, "| streaming read bandwidth (parallel sum, 512 MiB) | {bw:.2} GB/s |")?;
+    writeln!(
+        out,
+        "| streaming read bandwidth (parallel sum, 512 MiB) | {bw:.2} GB/s |"
+    )?;
     writeln!(out, "| T build time | {:.3} s |", build)?;
     writeln!(out, "| sub-rays traced per second | {:.1} M/s |", traced / build / 1e6)?;
     writeln!(
@@ -116,7 +125,12 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
         "| sub-rays entering the pupil | {:.1} % |",
         100.0 * t.stats.sub_rays_in_pupil as f64 / traced
     )?;
-    writeln!(out, "| nnz(T) | {} ({:.1} MB for T and Tᵀ) |", t.nnz(), t.memory_bytes() as f64 / 1e6)?;
+    writeln!(
+        out,
+        "| nnz(T) | {} ({:.1} MB for T and Tᵀ) |",
+        t.nnz(),
+        t.memory_bytes() as f64 / 1e6
+    )?;
     writeln!(
         out,
         "| A·L (all {n} bands + coupling) | {:.2} ms, {:.2} GB/s effective = {:.0} % of streaming |",
@@ -131,7 +145,11 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
         adj_bytes / adj / 1e9,
         100.0 * adj_bytes / adj / 1e9 / bw
     )?;
-    writeln!(out, "| peak resident memory | {:.0} MB |", peak_memory_bytes() as f64 / 1e6)?;
+    writeln!(
+        out,
+        "| peak resident memory | {:.0} MB |",
+        peak_memory_bytes() as f64 / 1e6
+    )?;
     Ok(out)
 }
 
@@ -150,10 +168,17 @@ pub struct BenchProblem {
 impl BenchProblem {
     /// Builds the problem: the target reads a PIN slip, every other observer is shown a noise mask.
     pub fn new(display: &DisplayGeometry, k: usize, sub_rays: u32) -> Result<Self> {
-        let opts = TransportOptions { sub_rays, ..Default::default() };
+        let opts = TransportOptions {
+            sub_rays,
+            ..Default::default()
+        };
         let target = VisionProfile::perfect();
         let mut people = vec![target];
-        people.extend(crate::population::sample_population(k.saturating_sub(1), 7, Default::default()));
+        people.extend(crate::population::sample_population(
+            k.saturating_sub(1),
+            7,
+            Default::default(),
+        ));
         let observers = people
             .iter()
             .map(|p| Observer::new(display, p, EyePosition::default(), &opts))
@@ -162,10 +187,18 @@ impl BenchProblem {
         let doc = crate::glyphs::render_text(&["PIN", "4821"], g.width * 4, g.height * 4, (g.width / 8).max(1));
         let mut objectives = vec![observers[0].objective(&doc, crate::pipeline::OBJECTIVE_LEVEL)];
         for (i, o) in observers.iter().enumerate().skip(1) {
-            objectives.push(o.objective(&noise_decoy(g.width, g.height, 2, i as u64), crate::pipeline::OBJECTIVE_LEVEL));
+            objectives.push(o.objective(
+                &noise_decoy(g.width, g.height, 2, i as u64),
+                crate::pipeline::OBJECTIVE_LEVEL,
+            ));
         }
         let energy = objectives[0].iter().map(|v| (*v as f64).powi(2)).sum();
-        Ok(Self { observers, objectives, energy, tikhonov: 1e-4 })
+        Ok(Self {
+            observers,
+            objectives,
+            energy,
+            tikhonov: 1e-4,
+        })
     }
 
     /// The objective over the problem.
@@ -174,7 +207,11 @@ impl BenchProblem {
             .observers
             .iter()
             .zip(&self.objectives)
-            .map(|(o, obj)| Term { observer: o, objective: obj.clone(), weight: 1.0 })
+            .map(|(o, obj)| Term {
+                observer: o,
+                objective: obj.clone(),
+                weight: 1.0,
+            })
             .collect();
         MultiplexObjective::new(terms, self.observers[0].coupling.len(), self.energy, self.tikhonov)
     }
@@ -241,7 +278,12 @@ pub fn solver_bench(problem: &BenchProblem, label: &str) -> Result<(String, f64,
         x0.clone(),
         0.0,
         1.0,
-        &SolverOptions { max_iterations: 3000, tolerance: 1e-9, patience: 20, ..Default::default() },
+        &SolverOptions {
+            max_iterations: 3000,
+            tolerance: 1e-9,
+            patience: 20,
+            ..Default::default()
+        },
         &mut |_| {},
         &cancel,
     );
@@ -254,11 +296,19 @@ pub fn solver_bench(problem: &BenchProblem, label: &str) -> Result<(String, f64,
         x0,
         0.0,
         1.0,
-        &SolverOptions { max_iterations: 3000, tolerance: 1e-9, patience: 20, ..Default::default() },
+        &SolverOptions {
+            max_iterations: 3000,
+            tolerance: 1e-9,
+            patience: 20,
+            ..Default::default()
+        },
         &mut |p| times.push((p.iteration, p.objective, start.elapsed().as_secs_f64())),
         &cancel,
     );
-    let hit = times.iter().find(|(_, f, _)| *f <= f_star * (1.0 + 1e-3) + 1e-12).copied();
+    let hit = times
+        .iter()
+        .find(|(_, f, _)| *f <= f_star * (1.0 + 1e-3) + 1e-12)
+        .copied();
     let (its, secs) = hit.map(|(i, _, t)| (i, t)).unwrap_or((run.iterations, run.seconds));
     let per_it = match (times.first(), times.last()) {
         (Some(a), Some(b)) if times.len() > 1 => (b.2 - a.2) / (times.len() - 1) as f64,
@@ -288,7 +338,16 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
     let block = format!("{start}\n{body}{end}");
     let new = match (old.find(&start), old.find(&end)) {
         (Some(a), Some(b)) if b > a => format!("{}{}{}", &old[..a], block, &old[b + end.len()..]),
-        _ => format!("{}{}{}\n", old, if old.is_empty() || old.ends_with('\n') { "" } else { "\n" }, block),
+        _ => format!(
+            "{}{}{}\n",
+            old,
+            if old.is_empty() || old.ends_with('\n') {
+                ""
+            } else {
+                "\n"
+            },
+            block
+        ),
     };
     std::fs::write(path, new).with_context(|| format!("writing {}", path.display()))
 }

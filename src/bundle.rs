@@ -209,9 +209,7 @@ pub enum BundleError {
         name: String,
     },
     /// A file name used twice, or one that clashes with a name the bundle reserves.
-    #[error(
-        "{name:?} appears twice in the bundle or clashes with a file the bundle writes itself"
-    )]
+    #[error("{name:?} appears twice in the bundle or clashes with a file the bundle writes itself")]
     DuplicateName {
         /// The name.
         name: String,
@@ -255,13 +253,9 @@ fn check_plain_name(name: &str) -> Result<(), BundleError> {
     let unsafe_name = name.is_empty()
         || name.starts_with('.')
         || name.contains("..")
-        || name
-            .chars()
-            .any(|c| matches!(c, '/' | '\\' | ':') || c.is_control());
+        || name.chars().any(|c| matches!(c, '/' | '\\' | ':') || c.is_control());
     if unsafe_name {
-        Err(BundleError::UnsafeName {
-            name: name.to_string(),
-        })
+        Err(BundleError::UnsafeName { name: name.to_string() })
     } else {
         Ok(())
     }
@@ -290,9 +284,7 @@ pub fn write_bundle(
     extra_files: &[(String, Vec<u8>)],
     mask_pixels_per_hole: u32,
 ) -> Result<Manifest, BundleError> {
-    display
-        .validate()
-        .map_err(|e| geometry(format!("display: {e}")))?;
+    display.validate().map_err(|e| geometry(format!("display: {e}")))?;
     let n_bands = display.n_bands();
     let n_samples = display.n_samples_per_band();
     if l.len() != n_samples * n_bands {
@@ -312,8 +304,7 @@ pub fn write_bundle(
         });
     }
     let mask_k = mask_pixels_per_hole;
-    let mask_pixels =
-        display.holes_x as u64 * display.holes_y as u64 * mask_k as u64 * mask_k as u64;
+    let mask_pixels = display.holes_x as u64 * display.holes_y as u64 * mask_k as u64 * mask_k as u64;
     if !(1..=MAX_MASK_PIXELS_PER_HOLE).contains(&mask_k) || mask_pixels > MAX_MASK_PIXELS {
         return Err(geometry(format!(
             "{MASK_FILE}: {mask_k} pixels per hole must be within 1..={MAX_MASK_PIXELS_PER_HOLE} \
@@ -339,8 +330,7 @@ pub fn write_bundle(
 
     // Encode before touching the disk: a failure here leaves nothing to clean up.
     let (width, height) = display.frame_size();
-    let mut contents: Vec<(String, Vec<u8>, FileRole)> =
-        Vec::with_capacity(n_bands + 1 + extra_files.len());
+    let mut contents: Vec<(String, Vec<u8>, FileRole)> = Vec::with_capacity(n_bands + 1 + extra_files.len());
     let scale = 1.0 / display.l_max;
     let mut frame = vec![0f32; n_samples];
     for band in 0..n_bands {
@@ -348,19 +338,13 @@ pub fn write_bundle(
             *v = (l[p * n_bands + band] as f64 * scale) as f32;
         }
         let name = frame_file_name(band);
-        let png = encode_png(
-            &name,
-            &DynamicImage::ImageLuma16(grey16(&frame, width, height)),
-        )?;
+        let png = encode_png(&name, &DynamicImage::ImageLuma16(grey16(&frame, width, height)))?;
         contents.push((name, png, FileRole::Frame { band: band as u32 }));
     }
     drop(frame);
     let (mask_w, mask_h, mask) = display.barrier_mask(mask_k);
-    let mask = image::GrayImage::from_raw(mask_w, mask_h, mask).ok_or_else(|| {
-        geometry(format!(
-            "{MASK_FILE}: mask buffer does not match {mask_w}×{mask_h}"
-        ))
-    })?;
+    let mask = image::GrayImage::from_raw(mask_w, mask_h, mask)
+        .ok_or_else(|| geometry(format!("{MASK_FILE}: mask buffer does not match {mask_w}×{mask_h}")))?;
     contents.push((
         MASK_FILE.to_string(),
         encode_png(MASK_FILE, &DynamicImage::ImageLuma8(mask))?,
@@ -399,10 +383,9 @@ pub fn write_bundle(
             })
             .collect(),
     };
-    let mut manifest_json =
-        serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
-            reason: format!("cannot serialise: {e}"),
-        })?;
+    let mut manifest_json = serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
+        reason: format!("cannot serialise: {e}"),
+    })?;
     manifest_json.push(b'\n');
     contents.push((MANIFEST_FILE.to_string(), manifest_json, FileRole::Other));
 
@@ -418,11 +401,9 @@ pub fn write_bundle(
     sync_dir(tmp.path())?;
     fs::rename(tmp.path(), dir).map_err(|source| match source.kind() {
         // Someone filled `dir` after the check above.
-        std::io::ErrorKind::DirectoryNotEmpty | std::io::ErrorKind::AlreadyExists => {
-            BundleError::NotEmpty {
-                path: dir.to_path_buf(),
-            }
-        }
+        std::io::ErrorKind::DirectoryNotEmpty | std::io::ErrorKind::AlreadyExists => BundleError::NotEmpty {
+            path: dir.to_path_buf(),
+        },
         _ => BundleError::Io {
             op: "rename the temporary bundle to",
             path: dir.to_path_buf(),
@@ -498,11 +479,10 @@ fn sync_dir(dir: &Path) -> Result<(), BundleError> {
 
 fn encode_png(name: &str, img: &DynamicImage) -> Result<Vec<u8>, BundleError> {
     let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, ImageFormat::Png)
-        .map_err(|e| BundleError::Png {
-            name: name.to_string(),
-            reason: e.to_string(),
-        })?;
+    img.write_to(&mut out, ImageFormat::Png).map_err(|e| BundleError::Png {
+        name: name.to_string(),
+        reason: e.to_string(),
+    })?;
     Ok(out.into_inner())
 }
 
@@ -524,10 +504,9 @@ pub fn read_bundle(path: &Path) -> Result<(Manifest, Vec<f32>), BundleError> {
         Source::Dir(path.to_path_buf())
     } else {
         let file = fs::File::open(path).map_err(io_err("open", path))?;
-        let archive =
-            zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| BundleError::Zip {
-                reason: format!("{}: {e}", path.display()),
-            })?;
+        let archive = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| BundleError::Zip {
+            reason: format!("{}: {e}", path.display()),
+        })?;
         Source::Zip(Box::new(archive))
     };
 
@@ -539,9 +518,7 @@ pub fn read_bundle(path: &Path) -> Result<(Manifest, Vec<f32>), BundleError> {
         });
     }
     let manifest: Manifest =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest {
-            reason: e.to_string(),
-        })?;
+        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
     let layout = check_manifest(&manifest)?;
 
     // Every listed file, verified before anything is decoded.
@@ -672,10 +649,7 @@ fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
                     ))
                 })?;
                 if slot.replace(i).is_some() {
-                    return Err(geometry(format!(
-                        "{}: a second frame for band {band}",
-                        entry.name
-                    )));
+                    return Err(geometry(format!("{}: a second frame for band {band}", entry.name)));
                 }
             }
             FileRole::BarrierMask => {
@@ -691,14 +665,7 @@ fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
     let frames = frames
         .into_iter()
         .enumerate()
-        .map(|(band, f)| {
-            f.ok_or_else(|| {
-                geometry(format!(
-                    "no frame is listed for band {band} of {}",
-                    d.n_bands()
-                ))
-            })
-        })
+        .map(|(band, f)| f.ok_or_else(|| geometry(format!("no frame is listed for band {band} of {}", d.n_bands()))))
         .collect::<Result<Vec<_>, _>>()?;
     let mask = mask.ok_or_else(|| BundleError::Manifest {
         reason: "no barrier mask is listed".to_string(),
@@ -761,9 +728,7 @@ impl Source {
                 let path = dir.join(name);
                 let file = match fs::File::open(&path) {
                     Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                        return Err(BundleError::Missing {
-                            name: name.to_string(),
-                        })
+                        return Err(BundleError::Missing { name: name.to_string() })
                     }
                     r => r.map_err(io_err("open", &path))?,
                 };
@@ -774,9 +739,7 @@ impl Source {
             Source::Zip(archive) => {
                 let entry = match archive.by_name(name) {
                     Err(zip::result::ZipError::FileNotFound) => {
-                        return Err(BundleError::Missing {
-                            name: name.to_string(),
-                        })
+                        return Err(BundleError::Missing { name: name.to_string() })
                     }
                     r => r.map_err(|e| BundleError::Zip {
                         reason: format!("{name}: {e}"),
@@ -808,14 +771,10 @@ pub fn zip_bundle<W: Write + Seek>(dir: &Path, out: W) -> Result<(), BundleError
         });
     }
     let manifest: Manifest =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest {
-            reason: e.to_string(),
-        })?;
+        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
     check_manifest(&manifest)?;
 
-    let zip_err = |e: zip::result::ZipError| BundleError::Zip {
-        reason: e.to_string(),
-    };
+    let zip_err = |e: zip::result::ZipError| BundleError::Zip { reason: e.to_string() };
     let options = zip::write::SimpleFileOptions::default()
         .last_modified_time(zip::DateTime::default())
         .unix_permissions(0o644);
@@ -826,11 +785,9 @@ pub fn zip_bundle<W: Write + Seek>(dir: &Path, out: W) -> Result<(), BundleError
             options.compression_method(zip::CompressionMethod::Deflated),
         )
         .map_err(zip_err)?;
-    writer
-        .write_all(&manifest_bytes)
-        .map_err(|e| BundleError::Zip {
-            reason: format!("{MANIFEST_FILE}: {e}"),
-        })?;
+    writer.write_all(&manifest_bytes).map_err(|e| BundleError::Zip {
+        reason: format!("{MANIFEST_FILE}: {e}"),
+    })?;
     for entry in &manifest.files {
         let bytes = source.read(&entry.name, entry.bytes)?;
         if bytes.len() as u64 != entry.bytes {
@@ -961,16 +918,11 @@ mod tests {
         let root = tempfile::tempdir().unwrap();
         let dir = root.path().join("b");
         let (d, l, _) = write_small(&dir);
-        let frame = image::open(dir.join(frame_file_name(2)))
-            .unwrap()
-            .into_luma16();
+        let frame = image::open(dir.join(frame_file_name(2))).unwrap().into_luma16();
         let (x, y, i, j) = (5, 3, 1, 4);
         let p = d.sample_index(x, y, i, j);
         let v = frame.get_pixel(x * d.views_u + i, y * d.views_v + j)[0];
-        assert_eq!(
-            v,
-            (l[p * d.n_bands() + 2] as f64 / d.l_max * 65535.0).round() as u16
-        );
+        assert_eq!(v, (l[p * d.n_bands() + 2] as f64 / d.l_max * 65535.0).round() as u16);
     }
 
     #[test]
@@ -1033,11 +985,7 @@ mod tests {
         .unwrap();
         fs::write(dir.join("frame_0.png"), &wrong).unwrap();
         rewrite_manifest(&dir, |m| {
-            let e = m
-                .files
-                .iter_mut()
-                .find(|e| e.name == "frame_0.png")
-                .unwrap();
+            let e = m.files.iter_mut().find(|e| e.name == "frame_0.png").unwrap();
             e.sha256 = sha256_hex(&wrong);
             e.bytes = wrong.len() as u64;
         });
@@ -1087,11 +1035,7 @@ mod tests {
         let too_long = vec![("r".repeat(300), b"x".to_vec())];
         let err = write_bundle(&dir, &d, &l, &meta(), &too_long, 4).unwrap_err();
         assert!(matches!(err, BundleError::Io { .. }), "{err}");
-        assert!(
-            entries(root.path()).is_empty(),
-            "{:?}",
-            entries(root.path())
-        );
+        assert!(entries(root.path()).is_empty(), "{:?}", entries(root.path()));
         assert!(!root.path().join("x").exists());
     }
 

@@ -346,7 +346,13 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Example(ExampleCommand::Profile(a)) => {
             print_stdout(&serde_json::to_string_pretty(&example_profile(&a)?)?)?;
         }
-        Command::Example(ExampleCommand::Document { text, width, height, scale, out }) => {
+        Command::Example(ExampleCommand::Document {
+            text,
+            width,
+            height,
+            scale,
+            out,
+        }) => {
             if !(8..=4096).contains(&width) || !(8..=4096).contains(&height) {
                 bail!("--width and --height must be within 8..=4096 pixels");
             }
@@ -367,10 +373,18 @@ pub fn run(cli: Cli) -> Result<()> {
             let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
             rt.block_on(crate::client::run(args))?;
         }
-        Command::Experiment(ExperimentCommand::Paper { out, max_iterations, population }) => {
+        Command::Experiment(ExperimentCommand::Paper {
+            out,
+            max_iterations,
+            population,
+        }) => {
             print!("{}", crate::experiment::paper(&out, max_iterations, population)?);
         }
-        Command::Experiment(ExperimentCommand::Sweep { out, population, max_iterations }) => {
+        Command::Experiment(ExperimentCommand::Sweep {
+            out,
+            population,
+            max_iterations,
+        }) => {
             print!("{}", crate::experiment::sweep(&out, population, max_iterations)?.0);
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
@@ -393,7 +407,10 @@ fn example_profile(a: &ExampleProfileArgs) -> Result<VisionProfile> {
         p.validate()?;
         return Ok(p);
     }
-    let mut p = VisionProfile { pupil_diameter_mm: a.pupil, ..VisionProfile::perfect() };
+    let mut p = VisionProfile {
+        pupil_diameter_mm: a.pupil,
+        ..VisionProfile::perfect()
+    };
     if a.sphere.is_some() || a.cylinder.is_some() {
         let rx = Prescription {
             sphere_d: a.sphere.unwrap_or(0.0),
@@ -414,8 +431,16 @@ fn example_profile(a: &ExampleProfileArgs) -> Result<VisionProfile> {
 fn simulate(a: &SimulateArgs) -> Result<()> {
     let display = read_display(&a.display)?;
     let profile = read_profile(&a.profile)?;
-    let options = TransportOptions { sub_rays: a.sub_rays, retina_oversample: a.oversample, ..Default::default() };
-    let eye = EyePosition { x_mm: a.eye_x, y_mm: a.eye_y, dz_mm: 0.0 };
+    let options = TransportOptions {
+        sub_rays: a.sub_rays,
+        retina_oversample: a.oversample,
+        ..Default::default()
+    };
+    let eye = EyePosition {
+        x_mm: a.eye_x,
+        y_mm: a.eye_y,
+        dz_mm: 0.0,
+    };
     let observer = Observer::new(&display, &profile, eye, &options)?;
     let l = match (&a.image, &a.frames) {
         (Some(img), _) => plain_light_field_for_image(&display, &imaging::load_image(img)?),
@@ -551,7 +576,12 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     if a.population > 2000 {
         bail!("--population must be at most 2000, got {}", a.population);
     }
-    let options = EvaluationOptions { population: a.population, seed: a.seed, threshold: a.threshold, ..Default::default() };
+    let options = EvaluationOptions {
+        population: a.population,
+        seed: a.seed,
+        threshold: a.threshold,
+        ..Default::default()
+    };
     let bar = progress_bar("evaluating");
     let cancel = std::sync::atomic::AtomicBool::new(false);
     let ev = crate::evaluate::evaluate(
@@ -568,9 +598,17 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     bar.finish_and_clear();
     crate::pipeline::write_evaluation(&ev, &a.out)?;
     let r = &ev.report;
-    println!("target: legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}", r.target.legibility, r.target.psnr_db, r.target.ssim);
+    println!(
+        "target: legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}",
+        r.target.legibility, r.target.psnr_db, r.target.ssim
+    );
     for o in &r.observers {
-        println!("{}: legibility {:.2}{}", o.label, o.legibility, if o.readable { " (READS)" } else { "" });
+        println!(
+            "{}: legibility {:.2}{}",
+            o.label,
+            o.legibility,
+            if o.readable { " (READS)" } else { "" }
+        );
     }
     if let Some(p) = &r.population {
         println!(
@@ -579,7 +617,10 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         );
     }
     if let Some(c) = &r.camera {
-        println!("camera attacker best: {} legibility {:.2}", c.best.label, c.best.legibility);
+        println!(
+            "camera attacker best: {} legibility {:.2}",
+            c.best.label, c.best.legibility
+        );
     }
     if let Some(k) = &r.key_sensitivity {
         println!(
@@ -596,12 +637,21 @@ fn bench(a: &BenchArgs) -> Result<()> {
     let display = DisplayGeometry::preset(&a.preset)?;
     let all = a.section == "all";
     if !["all", "transport", "solver", "encode"].contains(&a.section.as_str()) {
-        bail!("--section must be transport, solver, encode or all, got {:?}", a.section);
+        bail!(
+            "--section must be transport, solver, encode or all, got {:?}",
+            a.section
+        );
     }
-    let cmd = format!("eyekey bench --preset {} --sub-rays {} --section {}", a.preset, a.sub_rays, a.section);
+    let cmd = format!(
+        "eyekey bench --preset {} --sub-rays {} --section {}",
+        a.preset, a.sub_rays, a.section
+    );
     let stamp = chrono::Utc::now().format("%Y-%m-%d %H:%M UTC");
     if all || a.section == "transport" {
-        let body = format!("Measured {stamp} by `{cmd}` (release build):\n\n{}", transport_bench(&display, a.sub_rays)?);
+        let body = format!(
+            "Measured {stamp} by `{cmd}` (release build):\n\n{}",
+            transport_bench(&display, a.sub_rays)?
+        );
         print!("{body}");
         write_section(&a.out, "transport", &body)?;
     }
@@ -642,7 +692,11 @@ fn bench(a: &BenchArgs) -> Result<()> {
             observers: crate::population::sample_population(1, 3, Default::default()),
             document: crate::glyphs::render_text(&["PIN", "4821"], g.0, g.1, (g.0 / 32).max(1)),
             decoy: None,
-            options: EncodeOptions { population_decoys: 0, sub_rays: a.sub_rays, ..Default::default() },
+            options: EncodeOptions {
+                population_decoys: 0,
+                sub_rays: a.sub_rays,
+                ..Default::default()
+            },
         };
         let dir = tempfile::tempdir()?;
         let cancel = std::sync::atomic::AtomicBool::new(false);
@@ -672,7 +726,9 @@ fn bench(a: &BenchArgs) -> Result<()> {
 fn init_tracing() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
     let _ = if std::env::var("EYEKEY_LOG_FORMAT").as_deref() == Ok("json") {
         builder.json().try_init()
     } else {

@@ -151,7 +151,13 @@ impl DisplayGeometry {
             if v.is_finite() && v >= min && v <= max {
                 Ok(())
             } else {
-                Err(DisplayError::OutOfRange { field, value: v, min, max, unit })
+                Err(DisplayError::OutOfRange {
+                    field,
+                    value: v,
+                    min,
+                    max,
+                    unit,
+                })
             }
         }
         range("holes_x", self.holes_x as f64, 1.0, 1024.0, "holes")?;
@@ -193,7 +199,10 @@ impl DisplayGeometry {
             });
         }
         for (index, p) in self.projectors.iter().enumerate() {
-            p.validate().map_err(|e| DisplayError::Projector { index, reason: e.to_string() })?;
+            p.validate().map_err(|e| DisplayError::Projector {
+                index,
+                reason: e.to_string(),
+            })?;
         }
         let samples = self.n_samples_per_band() as u64 * self.projectors.len() as u64;
         if samples > 64_000_000 {
@@ -248,7 +257,10 @@ impl DisplayGeometry {
 
     /// Barrier width and height, mm.
     pub fn extent_mm(&self) -> [f64; 2] {
-        [self.holes_x as f64 * self.hole_pitch_mm, self.holes_y as f64 * self.hole_pitch_mm]
+        [
+            self.holes_x as f64 * self.hole_pitch_mm,
+            self.holes_y as f64 * self.hole_pitch_mm,
+        ]
     }
 
     /// Index of light-field sample (x, y, i, j) within one band, in frame (row-major) order:
@@ -262,7 +274,12 @@ impl DisplayGeometry {
     pub fn sample_coords(&self, index: usize) -> (u32, u32, u32, u32) {
         let width = (self.holes_x * self.views_u) as usize;
         let (row, col) = ((index / width) as u32, (index % width) as u32);
-        (col / self.views_u, row / self.views_v, col % self.views_u, row % self.views_v)
+        (
+            col / self.views_u,
+            row / self.views_v,
+            col % self.views_u,
+            row % self.views_v,
+        )
     }
 
     /// The barrier mask as a binary image at `pixels_per_hole` pixels per hole pitch (1 = open).
@@ -278,8 +295,7 @@ impl DisplayGeometry {
                 let ox = ((pxi % k) as f64 + 0.5) * px - self.hole_pitch_mm / 2.0;
                 let oy = ((py % k) as f64 + 0.5) * px - self.hole_pitch_mm / 2.0;
                 // A hole smaller than a mask pixel still opens the pixel it falls in.
-                let open = ox * ox + oy * oy <= radius * radius
-                    || (ox.abs() <= px / 2.0 && oy.abs() <= px / 2.0);
+                let open = ox * ox + oy * oy <= radius * radius || (ox.abs() <= px / 2.0 && oy.abs() <= px / 2.0);
                 mask[(py * w + pxi) as usize] = if open { 255 } else { 0 };
             }
         }
@@ -297,7 +313,10 @@ mod tests {
             DisplayGeometry::preset(name).unwrap().validate().unwrap();
         }
         let p = DisplayGeometry::paper();
-        assert_eq!((p.holes_x, p.holes_y, p.views_u, p.views_v, p.n_bands()), (100, 100, 5, 5, 4));
+        assert_eq!(
+            (p.holes_x, p.holes_y, p.views_u, p.views_v, p.n_bands()),
+            (100, 100, 5, 5, 4)
+        );
         // 5 views span 5 × 1.2 mm = 6 mm: several views cross a 6 mm pupil.
         assert!((p.view_spacing_at_pupil_mm() - 1.2).abs() < 1e-9);
     }

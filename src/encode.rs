@@ -60,7 +60,10 @@ impl<'a> MultiplexObjective<'a> {
             n_unknowns,
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
-            scratch: Mutex::new(Scratch { image: vec![0f32; n_pixels * 3], field: vec![0f32; n_unknowns] }),
+            scratch: Mutex::new(Scratch {
+                image: vec![0f32; n_pixels * 3],
+                field: vec![0f32; n_unknowns],
+            }),
         }
     }
 
@@ -75,7 +78,11 @@ impl<'a> MultiplexObjective<'a> {
             .iter()
             .map(|t| {
                 let view = t.observer.view(l);
-                let r: f64 = view.par_iter().zip(t.objective.par_iter()).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
+                let r: f64 = view
+                    .par_iter()
+                    .zip(t.objective.par_iter())
+                    .map(|(a, b)| ((a - b) as f64).powi(2))
+                    .sum();
                 t.weight * r * self.scale
             })
             .collect()
@@ -92,13 +99,17 @@ impl Objective for MultiplexObjective<'_> {
         let Scratch { image, field } = &mut *guard;
         let mut f = 0.0;
         let mu = self.tikhonov as f32;
-        grad.par_iter_mut().zip(l.par_iter()).for_each(|(g, x)| *g = 2.0 * mu * x);
+        grad.par_iter_mut()
+            .zip(l.par_iter())
+            .for_each(|(g, x)| *g = 2.0 * mu * x);
         f += self.tikhonov * sq_norm(l);
         for t in &self.terms {
             let tr = &t.observer.transport;
             let img = &mut image[..tr.n_pixels() * 3];
             tr.forward_lms(l, &t.observer.coupling, img);
-            img.par_iter_mut().zip(t.objective.par_iter()).for_each(|(a, b)| *a -= b);
+            img.par_iter_mut()
+                .zip(t.objective.par_iter())
+                .for_each(|(a, b)| *a -= b);
             f += t.weight * self.scale * sq_norm(img);
             tr.adjoint_lms(img, &t.observer.coupling, field);
             let c = (2.0 * t.weight * self.scale) as f32;
@@ -111,7 +122,9 @@ impl Objective for MultiplexObjective<'_> {
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         let Scratch { image, field } = &mut *guard;
         let mu = self.tikhonov as f32;
-        out.par_iter_mut().zip(v.par_iter()).for_each(|(o, x)| *o = 2.0 * mu * x);
+        out.par_iter_mut()
+            .zip(v.par_iter())
+            .for_each(|(o, x)| *o = 2.0 * mu * x);
         for t in &self.terms {
             let tr = &t.observer.transport;
             let img = &mut image[..tr.n_pixels() * 3];
@@ -139,7 +152,14 @@ impl<'a> DiffMaxObjective<'a> {
     pub fn new(data: MultiplexObjective<'a>, target: &'a Observer, lambda_w: f64, lambda_c: f64) -> Self {
         let scale = data.scale;
         let n_bands = target.coupling.len();
-        Self { data, target, lambda_w, lambda_c, scale, n_bands }
+        Self {
+            data,
+            target,
+            lambda_w,
+            lambda_c,
+            scale,
+            n_bands,
+        }
     }
 
     /// (‖∂S_t/∂W‖², ‖∂S_t/∂c‖²) at `l`, unnormalised.
@@ -297,14 +317,22 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     fn small_display() -> DisplayGeometry {
-        DisplayGeometry { holes_x: 10, holes_y: 8, ..DisplayGeometry::paper() }
+        DisplayGeometry {
+            holes_x: 10,
+            holes_y: 8,
+            ..DisplayGeometry::paper()
+        }
     }
 
     fn observer(d: &DisplayGeometry, c4: f64, c7: f64, terms: Vec<usize>) -> Observer {
         let mut p = VisionProfile::perfect();
         p.zernike_um[4] = c4;
         p.zernike_um[7] = c7;
-        let opts = TransportOptions { sub_rays: 8, derivative_terms: terms, ..Default::default() };
+        let opts = TransportOptions {
+            sub_rays: 8,
+            derivative_terms: terms,
+            ..Default::default()
+        };
         Observer::new(d, &p, EyePosition::default(), &opts).unwrap()
     }
 
@@ -333,8 +361,16 @@ mod tests {
         let mk = || {
             MultiplexObjective::new(
                 vec![
-                    Term { observer: &t, objective: obj_t.clone(), weight: 1.0 },
-                    Term { observer: &r, objective: vec![0.2; r.transport.n_pixels() * 3], weight: 0.5 },
+                    Term {
+                        observer: &t,
+                        objective: obj_t.clone(),
+                        weight: 1.0,
+                    },
+                    Term {
+                        observer: &r,
+                        objective: vec![0.2; r.transport.n_pixels() * 3],
+                        weight: 0.5,
+                    },
                 ],
                 d.n_bands(),
                 energy,
@@ -358,19 +394,40 @@ mod tests {
         let r = observer(&d, 1.3, 0.0, vec![]);
         let np = t.transport.n_pixels();
         let pat_a: Vec<f32> = (0..np * 3).map(|i| if (i / 3) % 2 == 0 { 0.5 } else { 0.1 }).collect();
-        let pat_b: Vec<f32> = (0..np * 3).map(|i| if (i / 3 / 10) % 2 == 0 { 0.5 } else { 0.1 }).collect();
+        let pat_b: Vec<f32> = (0..np * 3)
+            .map(|i| if (i / 3 / 10) % 2 == 0 { 0.5 } else { 0.1 })
+            .collect();
         let energy = pat_a.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
         let obj = MultiplexObjective::new(
             vec![
-                Term { observer: &t, objective: pat_a.clone(), weight: 1.0 },
-                Term { observer: &r, objective: pat_b.clone(), weight: 1.0 },
+                Term {
+                    observer: &t,
+                    objective: pat_a.clone(),
+                    weight: 1.0,
+                },
+                Term {
+                    observer: &r,
+                    objective: pat_b.clone(),
+                    weight: 1.0,
+                },
             ],
             d.n_bands(),
             energy,
             0.0,
         );
-        let opts = SolverOptions { max_iterations: 300, ..Default::default() };
-        let res = minimise(&obj, vec![0.5; obj.dim()], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false));
+        let opts = SolverOptions {
+            max_iterations: 300,
+            ..Default::default()
+        };
+        let res = minimise(
+            &obj,
+            vec![0.5; obj.dim()],
+            0.0,
+            1.0,
+            &opts,
+            &mut |_| {},
+            &AtomicBool::new(false),
+        );
         let dist = |v: &[f32], p: &[f32]| v.iter().zip(p).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>();
         let (vt, vr) = (t.view(&res.x), r.view(&res.x));
         assert!(dist(&vt, &pat_a) < dist(&vt, &pat_b));

@@ -33,12 +33,17 @@ pub const DEFAULT_THRESHOLD: f64 = 0.38;
 /// Photopic luminance from LMS: the CIE 2008 physiologically-relevant V(λ) = 0.68990272 L + 0.34832189 M
 /// (CIE 170-2:2015; the LMS→XYZ matrix of `data/README.md` §1).
 pub fn luminance(lms: &[f32]) -> Vec<f32> {
-    lms.chunks_exact(3).map(|p| 0.689_902_7 * p[0] + 0.348_321_9 * p[1]).collect()
+    lms.chunks_exact(3)
+        .map(|p| 0.689_902_7 * p[0] + 0.348_321_9 * p[1])
+        .collect()
 }
 
 /// Luminance (Rec. 709 / sRGB weights on linear RGB) of an sRGB image, row-major.
 pub fn image_luminance(img: &RgbImage) -> Vec<f32> {
-    imaging::linear_rgb(img).iter().map(|c| (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]) as f32).collect()
+    imaging::linear_rgb(img)
+        .iter()
+        .map(|c| (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]) as f32)
+        .collect()
 }
 
 /// Pearson correlation of two equally long images; 0 when either is constant.
@@ -66,7 +71,9 @@ pub fn gaussian_blur(img: &[f32], width: usize, height: usize, sigma: f64) -> Ve
         return img.to_vec();
     }
     let r = (3.0 * sigma).ceil() as isize;
-    let k: Vec<f64> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp()).collect();
+    let k: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
     let ks: f64 = k.iter().sum();
     let k: Vec<f32> = k.iter().map(|v| (v / ks) as f32).collect();
     let mut tmp = vec![0f32; img.len()];
@@ -100,7 +107,10 @@ pub const DENOISE_SIGMAS: [f64; 3] = [0.0, 0.7, 1.5];
 /// Contrast-invariant legibility of a view (luminance, row-major) against the document's luminance:
 /// max over [`DENOISE_SIGMAS`] of |NCC(G_σ * view, document)|. A negative image is as readable as a positive.
 pub fn legibility(view: &[f32], document: &[f32], width: usize, height: usize) -> f64 {
-    DENOISE_SIGMAS.iter().map(|&s| ncc(&gaussian_blur(view, width, height, s), document).abs()).fold(0.0, f64::max)
+    DENOISE_SIGMAS
+        .iter()
+        .map(|&s| ncc(&gaussian_blur(view, width, height, s), document).abs())
+        .fold(0.0, f64::max)
 }
 
 /// PSNR in dB of `a` against reference `b` for a peak value `peak`.
@@ -182,7 +192,10 @@ impl Reference {
     /// Scores a luminance view; `white_luminance` is the viewer's luminance of the display's full white.
     pub fn score(&self, label: &str, view_luminance: &[f32], white_luminance: f64) -> ViewScore {
         let leg = legibility(view_luminance, &self.document, self.width, self.height);
-        let norm: Vec<f32> = view_luminance.iter().map(|v| (*v as f64 / white_luminance) as f32).collect();
+        let norm: Vec<f32> = view_luminance
+            .iter()
+            .map(|v| (*v as f64 / white_luminance) as f32)
+            .collect();
         let objective: Vec<f32> = self.document.iter().map(|v| (*v as f64 * self.level) as f32).collect();
         ViewScore {
             label: label.to_string(),
@@ -369,9 +382,15 @@ fn median(v: &mut [f64]) -> f64 {
 fn camera_rgb() -> ConeFundamentals {
     let g = |centre: f64, fwhm: f64| -> Vec<f64> {
         let s = fwhm / 2.354_820_045;
-        crate::spectral::wavelengths_nm().map(|l| (-(l - centre).powi(2) / (2.0 * s * s)).exp()).collect()
+        crate::spectral::wavelengths_nm()
+            .map(|l| (-(l - centre).powi(2) / (2.0 * s * s)).exp())
+            .collect()
     };
-    ConeFundamentals { l: g(600.0, 80.0), m: g(535.0, 80.0), s: g(460.0, 60.0) }
+    ConeFundamentals {
+        l: g(600.0, 80.0),
+        m: g(535.0, 80.0),
+        s: g(460.0, 60.0),
+    }
 }
 
 /// Evaluates light field `l`: the target, the given observers, a population sample, a camera attacker, key
@@ -388,8 +407,18 @@ pub fn evaluate(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Evaluation, EvaluationError> {
-    let topts = TransportOptions { sub_rays: options.sub_rays, seed: options.seed ^ 0xE7A1, ..Default::default() };
-    let check = || if cancel.load(Ordering::Relaxed) { Err(EvaluationError::Cancelled) } else { Ok(()) };
+    let topts = TransportOptions {
+        sub_rays: options.sub_rays,
+        seed: options.seed ^ 0xE7A1,
+        ..Default::default()
+    };
+    let check = || {
+        if cancel.load(Ordering::Relaxed) {
+            Err(EvaluationError::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
     let t_obs = Observer::new(display, target, EyePosition::default(), &topts)?;
     let g = t_obs.transport.grid;
     let reference = Reference::new(document, g.width, g.height, level, options.threshold);
@@ -431,7 +460,11 @@ pub fn evaluate(
             progress(0.1 + 0.5 * (k + 1) as f64 / people.len() as f64);
         }
         for (k, pic) in kept {
-            let name = if k == usize::MAX { "population_worst.png".to_string() } else { format!("person_{k}.png") };
+            let name = if k == usize::MAX {
+                "population_worst.png".to_string()
+            } else {
+                format!("person_{k}.png")
+            };
             pictures.push((name, pic));
         }
         let mut legs: Vec<f64> = scores.iter().map(|s| s.legibility).collect();
@@ -446,7 +479,12 @@ pub fn evaluate(
             max_legibility: legs.last().copied().unwrap_or(0.0),
             fraction_at_or_above: [0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6]
                 .iter()
-                .map(|&t| (t, legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64))
+                .map(|&t| {
+                    (
+                        t,
+                        legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64,
+                    )
+                })
                 .collect(),
             people: scores,
         })
@@ -464,7 +502,11 @@ pub fn evaluate(
             for &focus in &options.camera_focus_d {
                 check()?;
                 let w = ZernikeCoefficients::from_prescription(
-                    &crate::optics::zernike::Prescription { sphere_d: focus, cylinder_d: 0.0, axis_deg: 0.0 },
+                    &crate::optics::zernike::Prescription {
+                        sphere_d: focus,
+                        cylinder_d: 0.0,
+                        axis_deg: 0.0,
+                    },
                     aperture,
                 );
                 let tr = crate::transport::TransportCache::global()
@@ -478,7 +520,9 @@ pub fn evaluate(
                     })
                     .collect();
                 for n in 0..display.n_bands() {
-                    let sel = (0..display.n_bands()).map(|m| if m == n { [1.0; 3] } else { [0.0; 3] }).collect();
+                    let sel = (0..display.n_bands())
+                        .map(|m| if m == n { [1.0; 3] } else { [0.0; 3] })
+                        .collect();
                     configs.push((format!("filter_band_{n}"), sel));
                 }
                 for (name, c) in configs {
@@ -489,7 +533,9 @@ pub fn evaluate(
                     let s = reference.score(&label, &lum, cam.white[0]);
                     if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
                         // The attacker's picture: the channel stretched to its own range, shown in grey.
-                        let (lo, hi) = lum.iter().fold((f32::MAX, f32::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+                        let (lo, hi) = lum
+                            .iter()
+                            .fold((f32::MAX, f32::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
                         let pic = RgbImage::from_fn(g.width, g.height, |x, y| {
                             let v = (lum[(y * g.width + x) as usize] - lo) / (hi - lo).max(1e-12);
                             let b = (v.clamp(0.0, 1.0) * 255.0) as u8;
@@ -512,7 +558,9 @@ pub fn evaluate(
 
     let key_sensitivity = if options.key_directions > 0 {
         check()?;
-        Some(key_sensitivity(display, l, target, &reference, options, &topts, cancel)?)
+        Some(key_sensitivity(
+            display, l, target, &reference, options, &topts, cancel,
+        )?)
     } else {
         None
     };
@@ -524,7 +572,16 @@ pub fn evaluate(
             check()?;
             let mut w = f64::INFINITY;
             for (dx, dy) in [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
-                let o = Observer::new(display, target, EyePosition { x_mm: dx, y_mm: dy, dz_mm: 0.0 }, &topts)?;
+                let o = Observer::new(
+                    display,
+                    target,
+                    EyePosition {
+                        x_mm: dx,
+                        y_mm: dy,
+                        dz_mm: 0.0,
+                    },
+                    &topts,
+                )?;
                 w = w.min(reference.score_observer("target moved", &o, l).0.legibility);
             }
             worst.push(w);
@@ -539,15 +596,20 @@ pub fn evaluate(
                 }
             }
         }
-        Some(HeadMovement { offsets_mm: options.head_offsets_mm.clone(), worst_legibility: worst, readable_radius_mm: radius })
+        Some(HeadMovement {
+            offsets_mm: options.head_offsets_mm.clone(),
+            worst_legibility: worst,
+            readable_radius_mm: radius,
+        })
     } else {
         None
     };
     progress(1.0);
 
     let mut report = Report {
-        metric: "legibility = max over Gaussian denoising σ ∈ {0, 0.7, 1.5} px of |NCC(view luminance, document luminance)|"
-            .into(),
+        metric:
+            "legibility = max over Gaussian denoising σ ∈ {0, 0.7, 1.5} px of |NCC(view luminance, document luminance)|"
+                .into(),
         threshold: options.threshold,
         target: target_score,
         observers: observer_scores,
@@ -573,14 +635,21 @@ fn key_sensitivity(
     cancel: &AtomicBool,
 ) -> Result<KeySensitivity, EvaluationError> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(options.seed ^ 0x5EED);
-    let base_w = target.effective_wavefront().map_err(crate::observer::ObserverError::from)?;
+    let base_w = target
+        .effective_wavefront()
+        .map_err(crate::observer::ObserverError::from)?;
     let terms: Vec<usize> = (3..=14).collect();
     let optical_steps_um = vec![0.02, 0.05, 0.1, 0.2, 0.4, 0.8];
     let spectral_steps_sd = vec![0.25, 0.5, 1.0, 2.0, 4.0];
     let cones_std = target.cone_fundamentals();
     let threshold = options.threshold;
     let first_below = |legs: &[f64], steps: &[f64]| -> f64 {
-        steps.iter().zip(legs).find(|(_, l)| **l < threshold).map(|(s, _)| *s).unwrap_or(*steps.last().unwrap_or(&0.0))
+        steps
+            .iter()
+            .zip(legs)
+            .find(|(_, l)| **l < threshold)
+            .map(|(s, _)| *s)
+            .unwrap_or(*steps.last().unwrap_or(&0.0))
     };
     let mut optical_legibility = Vec::new();
     let mut radii = Vec::new();
@@ -611,7 +680,9 @@ fn key_sensitivity(
     let sds = {
         // Population SDs per parameter, estimated from samples of the shipped model.
         let mut r2 = rand_chacha::ChaCha8Rng::seed_from_u64(99);
-        let samples: Vec<[f64; 8]> = (0..400).map(|_| params_vec(&sample_observer_parameters(&mut r2))).collect();
+        let samples: Vec<[f64; 8]> = (0..400)
+            .map(|_| params_vec(&sample_observer_parameters(&mut r2)))
+            .collect();
         let mut sd = [0.0; 8];
         for (i, s) in sd.iter_mut().enumerate() {
             let m = samples.iter().map(|v| v[i]).sum::<f64>() / samples.len() as f64;
@@ -675,7 +746,16 @@ fn key_sensitivity(
 }
 
 fn params_vec(p: &crate::spectral::ObserverParameters) -> [f64; 8] {
-    [p.od_lens_pct, p.od_macula_pct, p.od_l_pct, p.od_m_pct, p.od_s_pct, p.shift_l_nm, p.shift_m_nm, p.shift_s_nm]
+    [
+        p.od_lens_pct,
+        p.od_macula_pct,
+        p.od_l_pct,
+        p.od_m_pct,
+        p.od_s_pct,
+        p.shift_l_nm,
+        p.shift_m_nm,
+        p.shift_s_nm,
+    ]
 }
 
 fn set_params(p: &mut crate::spectral::ObserverParameters, v: &[f64; 8]) {
@@ -692,7 +772,13 @@ fn set_params(p: &mut crate::spectral::ObserverParameters, v: &[f64; 8]) {
 /// One PNG with labelled tiles (objective, target, observers, worst person, camera's best) and a bar plot of
 /// the population's legibility against the threshold.
 pub fn contact_sheet(report: &Report, pictures: &[(String, RgbImage)]) -> RgbImage {
-    let wanted = ["objective.png", "target.png", "observer_0.png", "population_worst.png", "camera_best.png"];
+    let wanted = [
+        "objective.png",
+        "target.png",
+        "observer_0.png",
+        "population_worst.png",
+        "camera_best.png",
+    ];
     let tiles: Vec<(&str, &RgbImage)> = wanted
         .iter()
         .filter_map(|w| pictures.iter().find(|(n, _)| n == w).map(|(n, p)| (n.as_str(), p)))
@@ -724,7 +810,11 @@ pub fn contact_sheet(report: &Report, pictures: &[(String, RgbImage)]) -> RgbIma
     }
     // Plot: one bar per sampled person (legibility), a red line at the threshold, the target in green.
     let x0 = 8 + tiles.len() as u32 * (tile + 8);
-    let mut legs: Vec<f64> = report.population.as_ref().map(|p| p.people.iter().map(|s| s.legibility).collect()).unwrap_or_default();
+    let mut legs: Vec<f64> = report
+        .population
+        .as_ref()
+        .map(|p| p.people.iter().map(|s| s.legibility).collect())
+        .unwrap_or_default();
     legs.sort_by(|a, b| a.total_cmp(b));
     let bar_w = (tile / legs.len().max(1) as u32).max(1);
     let y_of = |v: f64| 8 + tile - ((v.clamp(0.0, 1.0) * tile as f64) as u32).min(tile);

@@ -32,16 +32,29 @@ pub fn paper_observers() -> Vec<(String, VisionProfile)> {
             "(i) target".into(),
             person(
                 [0.10, -0.15, 0.12, 0.05],
-                ObserverParameters { age_years: 28.0, shift_l_nm: 1.5, od_macula_pct: 30.0, ..Default::default() },
+                ObserverParameters {
+                    age_years: 28.0,
+                    shift_l_nm: 1.5,
+                    od_macula_pct: 30.0,
+                    ..Default::default()
+                },
             ),
         ),
         // The representative: the standard observer's cones and a typical (population-mean-sized) aberration.
-        ("(ii) representative".into(), person([-0.02, -0.03, 0.0, 0.0], ObserverParameters::default())),
+        (
+            "(ii) representative".into(),
+            person([-0.02, -0.03, 0.0, 0.0], ObserverParameters::default()),
+        ),
         (
             "(iii) other".into(),
             person(
                 [-0.12, 0.18, -0.05, 0.10],
-                ObserverParameters { age_years: 55.0, shift_m_nm: -1.5, od_lens_pct: 20.0, ..Default::default() },
+                ObserverParameters {
+                    age_years: 55.0,
+                    shift_m_nm: -1.5,
+                    od_lens_pct: 20.0,
+                    ..Default::default()
+                },
             ),
         ),
     ]
@@ -72,7 +85,11 @@ fn save(img: &RgbImage, dir: &Path, name: &str) -> Result<()> {
 /// A strip of labelled tiles.
 fn strip(tiles: &[(String, RgbImage)]) -> RgbImage {
     let tile = 150u32;
-    let mut sheet = RgbImage::from_pixel(tiles.len() as u32 * (tile + 6) + 6, tile + 30, image::Rgb([255, 255, 255]));
+    let mut sheet = RgbImage::from_pixel(
+        tiles.len() as u32 * (tile + 6) + 6,
+        tile + 30,
+        image::Rgb([255, 255, 255]),
+    );
     for (k, (label, pic)) in tiles.iter().enumerate() {
         let x0 = 6 + k as u32 * (tile + 6);
         let scaled = image::imageops::resize(pic, tile, tile, image::imageops::FilterType::Nearest);
@@ -92,24 +109,43 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
     let document = pin_slip(g.0, g.1);
     let decoy = crate::glyphs::render_text(&["XXXX", "0000"], g.0, g.1, (g.0 / 28).max(1));
     save(&document, out, "document.png")?;
-    let topts = TransportOptions { sub_rays: 16, seed: 977, ..Default::default() };
+    let topts = TransportOptions {
+        sub_rays: 16,
+        seed: 977,
+        ..Default::default()
+    };
     let viewers: Vec<Observer> = observers
         .iter()
         .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts))
         .collect::<Result<_, _>>()?;
     let grid = viewers[0].transport.grid;
-    let reference = Reference::new(&document, grid.width, grid.height, OBJECTIVE_LEVEL, crate::evaluate::DEFAULT_THRESHOLD);
+    let reference = Reference::new(
+        &document,
+        grid.width,
+        grid.height,
+        OBJECTIVE_LEVEL,
+        crate::evaluate::DEFAULT_THRESHOLD,
+    );
     let mut rows = Vec::new();
     let mut md = String::new();
     let cancel = AtomicBool::new(false);
     // A plain display shows the document at the display's full white, not at the encoders' objective level.
-    let plain_reference = Reference::new(&document, grid.width, grid.height, 1.0, crate::evaluate::DEFAULT_THRESHOLD);
+    let plain_reference = Reference::new(
+        &document,
+        grid.width,
+        grid.height,
+        1.0,
+        crate::evaluate::DEFAULT_THRESHOLD,
+    );
     let score_all = |figure: &str, variant: &str, l: &[f32], rows: &mut Vec<Row>| -> Vec<(String, RgbImage)> {
         let mut tiles = Vec::new();
         let reference = if figure == "13" { &plain_reference } else { &reference };
         for ((name, _), v) in observers.iter().zip(&viewers) {
             let (s, pic) = reference.score_observer(name, v, l);
-            tiles.push((format!("{} {:.2}", name.split(' ').next().unwrap_or(""), s.legibility), pic));
+            tiles.push((
+                format!("{} {:.2}", name.split(' ').next().unwrap_or(""), s.legibility),
+                pic,
+            ));
             rows.push(Row {
                 figure: figure.into(),
                 variant: variant.into(),
@@ -129,12 +165,20 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
     save(&strip(&tiles), out, "fig13_plain.png")?;
     let mut timings = Vec::new();
     for (fig, method) in [("14", Method::Multiplex), ("15", Method::Diffmax)] {
-        for (variant, ablation) in [("proposed", None), ("optical only", Some(Ablation::Optical)), ("spectral only", Some(Ablation::Spectral))] {
+        for (variant, ablation) in [
+            ("proposed", None),
+            ("optical only", Some(Ablation::Optical)),
+            ("spectral only", Some(Ablation::Spectral)),
+        ] {
             let spec = JobSpec {
                 display: display.clone(),
                 target: observers[0].1.clone(),
                 target_label: "paper (i)".into(),
-                observers: if method == Method::Multiplex { vec![observers[1].1.clone()] } else { vec![] },
+                observers: if method == Method::Multiplex {
+                    vec![observers[1].1.clone()]
+                } else {
+                    vec![]
+                },
                 document: document.clone(),
                 decoy: Some(decoy.clone()),
                 options: EncodeOptions {
@@ -149,14 +193,21 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
             };
             let t = Instant::now();
             let enc = encode(&spec, &|_| {}, &cancel)?;
-            timings.push(format!("Fig. {fig} {variant}: {:.1} s, {} iterations", t.elapsed().as_secs_f64(), enc.solver["iterations"]));
+            timings.push(format!(
+                "Fig. {fig} {variant}: {:.1} s, {} iterations",
+                t.elapsed().as_secs_f64(),
+                enc.solver["iterations"]
+            ));
             let tiles = score_all(fig, variant, &enc.light_field, &mut rows);
             let file = format!("fig{fig}_{}.png", variant.replace(' ', "_"));
             save(&strip(&tiles), out, &file)?;
         }
     }
     // The population's view of the proposed multiplex encoding (not in the paper, which had three observers).
-    writeln!(md, "| figure | encoding | observer | legibility | NCC | PSNR (dB) | SSIM | readable |")?;
+    writeln!(
+        md,
+        "| figure | encoding | observer | legibility | NCC | PSNR (dB) | SSIM | readable |"
+    )?;
     writeln!(md, "| --- | --- | --- | --- | --- | --- | --- | --- |")?;
     for r in &rows {
         writeln!(
@@ -173,7 +224,12 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
         )?;
     }
     if population > 0 {
-        let spec_opts = EncodeOptions { method: Method::Multiplex, population_decoys: 0, max_iterations, ..Default::default() };
+        let spec_opts = EncodeOptions {
+            method: Method::Multiplex,
+            population_decoys: 0,
+            max_iterations,
+            ..Default::default()
+        };
         let spec = JobSpec {
             display: display.clone(),
             target: observers[0].1.clone(),
@@ -181,7 +237,10 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
             observers: vec![observers[1].1.clone()],
             document: document.clone(),
             decoy: Some(decoy.clone()),
-            options: EncodeOptions { decoy: DecoyKind::Image, ..spec_opts },
+            options: EncodeOptions {
+                decoy: DecoyKind::Image,
+                ..spec_opts
+            },
         };
         let enc = encode(&spec, &|_| {}, &cancel)?;
         let ev = evaluate(
@@ -191,7 +250,12 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
             OBJECTIVE_LEVEL,
             &observers[0].1,
             &[],
-            &EvaluationOptions { population, key_directions: 0, head_offsets_mm: vec![], ..Default::default() },
+            &EvaluationOptions {
+                population,
+                key_directions: 0,
+                head_offsets_mm: vec![],
+                ..Default::default()
+            },
             &|_| {},
             &cancel,
         )?;
@@ -272,10 +336,28 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let target = {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
-        crate::population::sample_person(&mut rng, crate::population::SamplingScope { pupil_spread: false, ..Default::default() })
+        crate::population::sample_person(
+            &mut rng,
+            crate::population::SamplingScope {
+                pupil_spread: false,
+                ..Default::default()
+            },
+        )
     };
-    let base = |label: &str| (label.to_string(), sweep_display(7, 0.3, 500.0, 32, 4), 6.0, 6u32, DecoyKind::Noise, 0.3, 0u32);
-    let mut configs = vec![base("baseline: 7×7 views, 0.3 mm, 500 mm, 4 bands, 6 noise decoys w=0.3")];
+    let base = |label: &str| {
+        (
+            label.to_string(),
+            sweep_display(7, 0.3, 500.0, 32, 4),
+            6.0,
+            6u32,
+            DecoyKind::Noise,
+            0.3,
+            0u32,
+        )
+    };
+    let mut configs = vec![base(
+        "baseline: 7×7 views, 0.3 mm, 500 mm, 4 bands, 6 noise decoys w=0.3",
+    )];
     for v in [3u32, 5, 9] {
         let mut c = base(&format!("views {v}×{v}"));
         c.1 = sweep_display(v, 0.3, 500.0, 32, 4);
@@ -410,7 +492,10 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
         points.push(point);
     }
     let mut md = String::new();
-    writeln!(md, "| configuration | target legibility | population readable | population p95 | camera best | seconds |")?;
+    writeln!(
+        md,
+        "| configuration | target legibility | population readable | population p95 | camera best | seconds |"
+    )?;
     writeln!(md, "| --- | --- | --- | --- | --- | --- |")?;
     for p in &points {
         writeln!(
@@ -437,7 +522,13 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
         .collect();
     writeln!(md, "\nPareto frontier (target legibility ↑, population readable ↓):\n")?;
     for p in &frontier {
-        writeln!(md, "- {}: target {:.2}, readable {:.1} %", p.label, p.target_legibility, 100.0 * p.readable_fraction)?;
+        writeln!(
+            md,
+            "- {}: target {:.2}, readable {:.1} %",
+            p.label,
+            p.target_legibility,
+            100.0 * p.readable_fraction
+        )?;
     }
     // The `secure` preset is chosen from the frontier: the fewest readers among points where the target reads
     // with legibility ≥ 0.85.
@@ -466,9 +557,18 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     let display = DisplayGeometry::secure();
     let target = {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
-        crate::population::sample_person(&mut rng, crate::population::SamplingScope { pupil_spread: false, ..Default::default() })
+        crate::population::sample_person(
+            &mut rng,
+            crate::population::SamplingScope {
+                pupil_spread: false,
+                ..Default::default()
+            },
+        )
     };
-    std::fs::write(out.join("target_profile_example.json"), serde_json::to_string_pretty(&target)?)?;
+    std::fs::write(
+        out.join("target_profile_example.json"),
+        serde_json::to_string_pretty(&target)?,
+    )?;
     let g = (display.holes_x * 4, display.holes_y * 4);
     let document = pin_slip(g.0, g.1);
     let options = secure_encode_options();
@@ -498,7 +598,11 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
         OBJECTIVE_LEVEL,
         &target,
         &[],
-        &EvaluationOptions { population, key_directions: 4, ..Default::default() },
+        &EvaluationOptions {
+            population,
+            key_directions: 4,
+            ..Default::default()
+        },
         &|_| {},
         &cancel,
     )?;
@@ -507,7 +611,16 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     let r = &ev.report;
     let mut md = String::new();
     writeln!(md, "| quantity | value |\n| --- | --- |")?;
-    writeln!(md, "| display | `secure` preset: {}×{} holes at {} mm, {}×{} views, {} bands |", display.holes_x, display.holes_y, display.hole_pitch_mm, display.views_u, display.views_v, display.n_bands())?;
+    writeln!(
+        md,
+        "| display | `secure` preset: {}×{} holes at {} mm, {}×{} views, {} bands |",
+        display.holes_x,
+        display.holes_y,
+        display.hole_pitch_mm,
+        display.views_u,
+        display.views_v,
+        display.n_bands()
+    )?;
     writeln!(
         md,
         "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, {} adaptive rounds of {} candidates (decoys added: {}) |",
@@ -517,24 +630,65 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
         options.adaptive_candidates,
         enc.solver["adaptive_decoys_added"]
     )?;
-    writeln!(md, "| target legibility / PSNR / SSIM | {:.2} / {:.1} dB / {:.2} |", r.target.legibility, r.target.psnr_db, r.target.ssim)?;
+    writeln!(
+        md,
+        "| target legibility / PSNR / SSIM | {:.2} / {:.1} dB / {:.2} |",
+        r.target.legibility, r.target.psnr_db, r.target.ssim
+    )?;
     if let Some(p) = &r.population {
-        writeln!(md, "| sampled people who can read | {} of {} ({:.1} %) |", p.readable_count, p.count, 100.0 * p.readable_fraction)?;
-        writeln!(md, "| population legibility median / 95th pct / max | {:.2} / {:.2} / {:.2} |", p.median_legibility, p.p95_legibility, p.max_legibility)?;
-        let levels: Vec<String> =
-            p.fraction_at_or_above.iter().map(|(t, f)| format!("≥ {t:.2}: {:.1} %", 100.0 * f)).collect();
-        writeln!(md, "| population at or above legibility levels | {} |", levels.join(", "))?;
+        writeln!(
+            md,
+            "| sampled people who can read | {} of {} ({:.1} %) |",
+            p.readable_count,
+            p.count,
+            100.0 * p.readable_fraction
+        )?;
+        writeln!(
+            md,
+            "| population legibility median / 95th pct / max | {:.2} / {:.2} / {:.2} |",
+            p.median_legibility, p.p95_legibility, p.max_legibility
+        )?;
+        let levels: Vec<String> = p
+            .fraction_at_or_above
+            .iter()
+            .map(|(t, f)| format!("≥ {t:.2}: {:.1} %", 100.0 * f))
+            .collect();
+        writeln!(
+            md,
+            "| population at or above legibility levels | {} |",
+            levels.join(", ")
+        )?;
     }
     if let Some(c) = &r.camera {
-        writeln!(md, "| camera attacker's best | {:.2} ({}) |", c.best.legibility, c.best.label)?;
+        writeln!(
+            md,
+            "| camera attacker's best | {:.2} ({}) |",
+            c.best.legibility, c.best.label
+        )?;
     }
     if let Some(k) = &r.key_sensitivity {
-        writeln!(md, "| optical key radius / bits | {:.3} µm / {:.1} bits |", k.optical_radius_um, k.optical_bits)?;
-        writeln!(md, "| spectral key radius / bits | {:.2} SD / {:.1} bits |", k.spectral_radius_sd, k.spectral_bits)?;
-        writeln!(md, "| empirical bound from the population sample | {:.1} bits |", k.empirical_bits)?;
+        writeln!(
+            md,
+            "| optical key radius / bits | {:.3} µm / {:.1} bits |",
+            k.optical_radius_um, k.optical_bits
+        )?;
+        writeln!(
+            md,
+            "| spectral key radius / bits | {:.2} SD / {:.1} bits |",
+            k.spectral_radius_sd, k.spectral_bits
+        )?;
+        writeln!(
+            md,
+            "| empirical bound from the population sample | {:.1} bits |",
+            k.empirical_bits
+        )?;
     }
     if let Some(h) = &r.head_movement {
-        writeln!(md, "| target still reads within | {:.1} mm of the design eye position |", h.readable_radius_mm)?;
+        writeln!(
+            md,
+            "| target still reads within | {:.1} mm of the design eye position |",
+            h.readable_radius_mm
+        )?;
     }
     writeln!(md, "| encode / evaluation time | {t_encode:.1} s / {t_eval:.1} s |")?;
     std::fs::write(out.join("results.md"), &md)?;

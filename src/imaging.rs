@@ -12,7 +12,7 @@ use std::path::Path;
 
 use image::{ImageBuffer, Luma, Rgb, RgbImage};
 
-use crate::spectral::{linear_srgb_to_lms, lms_to_linear_srgb, linear_to_srgb, srgb_to_linear, srgb_white_lms};
+use crate::spectral::{linear_srgb_to_lms, linear_to_srgb, lms_to_linear_srgb, srgb_to_linear, srgb_white_lms};
 
 /// Largest document accepted by default: 64 megapixels decoded, 64 MiB encoded.
 pub const DEFAULT_MAX_PIXELS: u64 = 64_000_000;
@@ -62,10 +62,16 @@ pub enum ImagingError {
 /// Decodes a PNG or JPEG held in memory, refusing anything whose header declares more than `max_pixels`
 /// (checked before decoding, so decompression bombs never allocate).
 pub fn decode_image(bytes: &[u8], what: &str, max_pixels: u64) -> Result<RgbImage, ImagingError> {
-    let dec = |e: image::ImageError| ImagingError::Decode { what: what.to_string(), reason: e.to_string() };
-    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| {
-        ImagingError::Decode { what: what.to_string(), reason: e.to_string() }
-    })?;
+    let dec = |e: image::ImageError| ImagingError::Decode {
+        what: what.to_string(),
+        reason: e.to_string(),
+    };
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| ImagingError::Decode {
+            what: what.to_string(),
+            reason: e.to_string(),
+        })?;
     match reader.format() {
         Some(image::ImageFormat::Png) | Some(image::ImageFormat::Jpeg) => {}
         _ => {
@@ -77,11 +83,19 @@ pub fn decode_image(bytes: &[u8], what: &str, max_pixels: u64) -> Result<RgbImag
     }
     let (width, height) = reader.into_dimensions().map_err(dec)?;
     if width == 0 || height == 0 || width as u64 * height as u64 > max_pixels {
-        return Err(ImagingError::TooLarge { what: what.to_string(), width, height, max_pixels });
+        return Err(ImagingError::TooLarge {
+            what: what.to_string(),
+            width,
+            height,
+            max_pixels,
+        });
     }
-    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| {
-        ImagingError::Decode { what: what.to_string(), reason: e.to_string() }
-    })?;
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| ImagingError::Decode {
+            what: what.to_string(),
+            reason: e.to_string(),
+        })?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(width);
     limits.max_image_height = Some(height);
@@ -92,15 +106,20 @@ pub fn decode_image(bytes: &[u8], what: &str, max_pixels: u64) -> Result<RgbImag
 
 /// Reads a PNG or JPEG document from a file.
 pub fn load_image(path: &Path) -> Result<RgbImage, ImagingError> {
-    let bytes =
-        std::fs::read(path).map_err(|source| ImagingError::Io { path: path.display().to_string(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| ImagingError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
     decode_image(&bytes, &path.display().to_string(), DEFAULT_MAX_PIXELS)
 }
 
 /// Writes an 8-bit sRGB PNG.
 pub fn save_rgb_png(img: &RgbImage, path: &Path) -> Result<(), ImagingError> {
     img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| ImagingError::Write { path: path.display().to_string(), reason: e.to_string() })
+        .map_err(|e| ImagingError::Write {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
 }
 
 /// Resamples an image to `width`×`height` (area-averaging filter, in sRGB values).
@@ -115,7 +134,11 @@ pub fn resize(img: &RgbImage, width: u32, height: u32) -> RgbImage {
 pub fn linear_rgb(img: &RgbImage) -> Vec<[f64; 3]> {
     img.pixels()
         .map(|p| {
-            [srgb_to_linear(p[0] as f64 / 255.0), srgb_to_linear(p[1] as f64 / 255.0), srgb_to_linear(p[2] as f64 / 255.0)]
+            [
+                srgb_to_linear(p[0] as f64 / 255.0),
+                srgb_to_linear(p[1] as f64 / 255.0),
+                srgb_to_linear(p[2] as f64 / 255.0),
+            ]
         })
         .collect()
 }
@@ -173,8 +196,7 @@ pub fn plain_intensities(rgb_linear: &[[f64; 3]], coupling: &[[f64; 3]]) -> Vec<
         let target: [f64; 3] = std::array::from_fn(|a| white[a] * lms[a] / w_std[a]);
         let g = (0..3).map(|a| target[a] / white[a]).sum::<f64>() / 3.0;
         let resid: [f64; 3] = std::array::from_fn(|a| target[a] - g * white[a]);
-        let z: Option<[f64; 3]> =
-            inv.map(|m| std::array::from_fn(|a| (0..3).map(|b| m[a][b] * resid[b]).sum()));
+        let z: Option<[f64; 3]> = inv.map(|m| std::array::from_fn(|a| (0..3).map(|b| m[a][b] * resid[b]).sum()));
         for c in coupling {
             let corr = z.map_or(0.0, |z| c[0] * z[0] + c[1] * z[1] + c[2] * z[2]);
             out.push((g + corr).clamp(0.0, 1.0) as f32);
@@ -200,7 +222,10 @@ pub fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
 
 /// A 16-bit greyscale image of `values` in [0, 1] (row-major), as projector frames are stored.
 pub fn grey16(values: &[f32], width: u32, height: u32) -> ImageBuffer<Luma<u16>, Vec<u16>> {
-    let data = values.iter().map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16).collect();
+    let data = values
+        .iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
+        .collect();
     ImageBuffer::from_raw(width, height, data).expect("buffer length matches the frame size")
 }
 
@@ -248,7 +273,10 @@ mod tests {
 
     #[test]
     fn garbage_and_bombs_are_refused_before_decoding() {
-        assert!(matches!(decode_image(b"hello", "doc", 100), Err(ImagingError::Decode { .. })));
+        assert!(matches!(
+            decode_image(b"hello", "doc", 100),
+            Err(ImagingError::Decode { .. })
+        ));
         // A valid PNG header that declares 100000×100000 pixels.
         let mut png = Vec::new();
         png.extend_from_slice(&[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]);
@@ -259,6 +287,9 @@ mod tests {
         png.extend_from_slice(&[8, 2, 0, 0, 0]);
         png.extend_from_slice(&[0, 0, 0, 0]);
         let e = decode_image(&png, "doc", DEFAULT_MAX_PIXELS);
-        assert!(matches!(e, Err(ImagingError::TooLarge { .. }) | Err(ImagingError::Decode { .. })), "{e:?}");
+        assert!(
+            matches!(e, Err(ImagingError::TooLarge { .. }) | Err(ImagingError::Decode { .. })),
+            "{e:?}"
+        );
     }
 }

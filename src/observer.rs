@@ -66,8 +66,16 @@ impl Observer {
     /// An observer from a transport operator and a coupling matrix.
     pub fn with_coupling(transport: Arc<TransportMatrix>, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
         let white = std::array::from_fn(|a| coupling_f64.iter().map(|c| c[a]).sum::<f64>() * l_max);
-        let coupling = coupling_f64.iter().map(|c| [c[0] as f32, c[1] as f32, c[2] as f32]).collect();
-        Self { transport, coupling, coupling_f64, white }
+        let coupling = coupling_f64
+            .iter()
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        Self {
+            transport,
+            coupling,
+            coupling_f64,
+            white,
+        }
     }
 
     /// The LMS retinal image `[r·3 + a]` of light field `l`.

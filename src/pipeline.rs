@@ -172,16 +172,25 @@ impl EncodeOptions {
             return bad("sub_rays", format!("must be within 1..=256, got {}", self.sub_rays));
         }
         if !(1..=20_000).contains(&self.max_iterations) {
-            return bad("max_iterations", format!("must be within 1..=20000, got {}", self.max_iterations));
+            return bad(
+                "max_iterations",
+                format!("must be within 1..=20000, got {}", self.max_iterations),
+            );
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
             return bad("tolerance", format!("must be within (0, 1), got {}", self.tolerance));
         }
         if self.population_decoys > 64 {
-            return bad("population_decoys", format!("at most 64, got {}", self.population_decoys));
+            return bad(
+                "population_decoys",
+                format!("at most 64, got {}", self.population_decoys),
+            );
         }
         if !(self.decoy_weight.is_finite() && (0.0..=100.0).contains(&self.decoy_weight)) {
-            return bad("decoy_weight", format!("must be within 0..=100, got {}", self.decoy_weight));
+            return bad(
+                "decoy_weight",
+                format!("must be within 0..=100, got {}", self.decoy_weight),
+            );
         }
         for (name, v) in [("lambda_w", self.lambda_w), ("lambda_c", self.lambda_c)] {
             if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
@@ -189,7 +198,10 @@ impl EncodeOptions {
             }
         }
         if !(self.head_radius_mm.is_finite() && (0.0..=20.0).contains(&self.head_radius_mm)) {
-            return bad("head_radius_mm", format!("must be within 0..=20 mm, got {}", self.head_radius_mm));
+            return bad(
+                "head_radius_mm",
+                format!("must be within 0..=20 mm, got {}", self.head_radius_mm),
+            );
         }
         if self.adaptive_rounds > 5 || self.adaptive_candidates > 200 || self.adaptive_per_round > 16 {
             return bad(
@@ -198,7 +210,10 @@ impl EncodeOptions {
             );
         }
         if self.evaluation_population > 2000 {
-            return bad("evaluation_population", format!("at most 2000, got {}", self.evaluation_population));
+            return bad(
+                "evaluation_population",
+                format!("at most 2000, got {}", self.evaluation_population),
+            );
         }
         Ok(())
     }
@@ -219,11 +234,7 @@ pub struct Encoded {
 }
 
 /// Encodes a job's document into a light field (no files written).
-pub fn encode(
-    spec: &JobSpec,
-    progress: &(dyn Fn(f64) + Sync),
-    cancel: &AtomicBool,
-) -> Result<Encoded, PipelineError> {
+pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBool) -> Result<Encoded, PipelineError> {
     use crate::encode::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
     use crate::observer::Observer;
     use crate::solve::{minimise, Objective, SolverOptions};
@@ -232,10 +243,14 @@ pub fn encode(
     let o = &spec.options;
     o.validate()?;
     let d = &spec.display;
-    d.validate().map_err(|e| PipelineError::Invalid(format!("display: {e}")))?;
-    spec.target.validate().map_err(|e| PipelineError::Invalid(format!("target profile: {e}")))?;
+    d.validate()
+        .map_err(|e| PipelineError::Invalid(format!("display: {e}")))?;
+    spec.target
+        .validate()
+        .map_err(|e| PipelineError::Invalid(format!("target profile: {e}")))?;
     for (k, p) in spec.observers.iter().enumerate() {
-        p.validate().map_err(|e| PipelineError::Invalid(format!("observers[{k}]: {e}")))?;
+        p.validate()
+            .map_err(|e| PipelineError::Invalid(format!("observers[{k}]: {e}")))?;
     }
     if !aspect_matches(&spec.document, d) {
         return Err(PipelineError::Invalid(format!(
@@ -258,9 +273,16 @@ pub fn encode(
         }
     }
     let diffmax = matches!(o.method, Method::Diffmax | Method::Combined);
-    let base = TransportOptions { sub_rays: o.sub_rays, seed: o.seed, retina_oversample: 1, derivative_terms: vec![] };
-    let target_opts =
-        TransportOptions { derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] }, ..base.clone() };
+    let base = TransportOptions {
+        sub_rays: o.sub_rays,
+        seed: o.seed,
+        retina_oversample: 1,
+        derivative_terms: vec![],
+    };
+    let target_opts = TransportOptions {
+        derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] },
+        ..base.clone()
+    };
     let internal = |e: crate::observer::ObserverError| PipelineError::Invalid(e.to_string());
     let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts).map_err(internal)?;
     progress(0.05);
@@ -298,7 +320,11 @@ pub fn encode(
     if o.head_radius_mm > 0.0 {
         let r = o.head_radius_mm;
         for (dx, dy) in [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
-            let eye = EyePosition { x_mm: dx, y_mm: dy, dz_mm: 0.0 };
+            let eye = EyePosition {
+                x_mm: dx,
+                y_mm: dy,
+                dz_mm: 0.0,
+            };
             moved.push(Observer::new(d, &spec.target, eye, &base).map_err(internal)?);
         }
     }
@@ -307,10 +333,21 @@ pub fn encode(
         (DecoyKind::Image, Some(img)) => img.clone(),
         _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
     };
-    let mut decoy_objectives: Vec<Vec<f32>> =
-        others.iter().enumerate().map(|(k, obs)| obs.objective(&decoy_for(k), OBJECTIVE_LEVEL)).collect();
-    let solver_opts = SolverOptions { max_iterations: o.max_iterations, tolerance: o.tolerance, ..Default::default() };
-    let rounds = if matches!(o.method, Method::Diffmax) { 0 } else { o.adaptive_rounds };
+    let mut decoy_objectives: Vec<Vec<f32>> = others
+        .iter()
+        .enumerate()
+        .map(|(k, obs)| obs.objective(&decoy_for(k), OBJECTIVE_LEVEL))
+        .collect();
+    let solver_opts = SolverOptions {
+        max_iterations: o.max_iterations,
+        tolerance: o.tolerance,
+        ..Default::default()
+    };
+    let rounds = if matches!(o.method, Method::Diffmax) {
+        0
+    } else {
+        o.adaptive_rounds
+    };
     let total_its = o.max_iterations as f64 * (rounds + 1) as f64;
     let l_max = d.l_max as f32;
     let tied = o.ablation == Some(Ablation::Spectral);
@@ -340,14 +377,27 @@ pub fn encode(
     );
     for round in 0..=rounds {
         let done_before = iterations as f64;
-        let mut report = |p: crate::solve::Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_its);
+        let mut report =
+            |p: crate::solve::Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_its);
         let result = {
-            let mut terms = vec![Term { observer: &target, objective: target_obj.clone(), weight: 1.0 }];
+            let mut terms = vec![Term {
+                observer: &target,
+                objective: target_obj.clone(),
+                weight: 1.0,
+            }];
             for m in &moved {
-                terms.push(Term { observer: m, objective: target_obj.clone(), weight: 0.25 });
+                terms.push(Term {
+                    observer: m,
+                    objective: target_obj.clone(),
+                    weight: 0.25,
+                });
             }
             for (obs, obj) in others.iter().zip(&decoy_objectives) {
-                terms.push(Term { observer: obs, objective: obj.clone(), weight: o.decoy_weight });
+                terms.push(Term {
+                    observer: obs,
+                    objective: obj.clone(),
+                    weight: o.decoy_weight,
+                });
             }
             let data = MultiplexObjective::new(terms, n, energy, 1e-4);
             let dm;
@@ -368,7 +418,9 @@ pub fn encode(
             return Err(PipelineError::Cancelled);
         }
         if result.termination == crate::solve::Termination::NumericalFailure {
-            return Err(PipelineError::Internal("the solver's objective became non-finite".into()));
+            return Err(PipelineError::Internal(
+                "the solver's objective became non-finite".into(),
+            ));
         }
         iterations += result.iterations;
         restarts += result.restarts;
@@ -381,7 +433,11 @@ pub fn encode(
         }
         // Adaptive decoys: sample fresh candidates (a seed stream the evaluation never uses), and add as decoy
         // observers the ones who can still read, most legible first.
-        let l_now = if tied { TiedViews::new(&DummyDim(x.len()), d).expand(&x) } else { x.clone() };
+        let l_now = if tied {
+            TiedViews::new(&DummyDim(x.len()), d).expand(&x)
+        } else {
+            x.clone()
+        };
         let candidates = crate::population::sample_population(
             o.adaptive_candidates as usize,
             o.seed.wrapping_add(7_000 + 1_000 * round as u64),
@@ -416,7 +472,11 @@ pub fn encode(
         }
     }
     let result = last.expect("at least one round ran");
-    let l = if tied { TiedViews::new(&DummyDim(x.len()), d).expand(&x) } else { x };
+    let l = if tied {
+        TiedViews::new(&DummyDim(x.len()), d).expand(&x)
+    } else {
+        x
+    };
     progress(0.85);
     let solver = serde_json::json!({
         "algorithm": "FISTA with gradient restart, step 1/L (power iteration)",
@@ -487,26 +547,32 @@ pub fn write_outputs(
         sub_rays: spec.options.sub_rays,
         ..Default::default()
     };
-    let labelled: Vec<(String, VisionProfile)> =
-        spec.observers.iter().enumerate().map(|(k, p)| (format!("observer_{k}"), p.clone())).collect();
+    let labelled: Vec<(String, VisionProfile)> = spec
+        .observers
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (format!("observer_{k}"), p.clone()))
+        .collect();
     let evaluation = if !with_evaluation {
         None
     } else {
-        Some(evaluate(
-        &spec.display,
-        &encoded.light_field,
-        &spec.document,
-        OBJECTIVE_LEVEL,
-        &spec.target,
-        &labelled,
-        &eval_opts,
-        &|p| progress(0.9 * p),
-        cancel,
-    )
-    .map_err(|e| match e {
-        crate::evaluate::EvaluationError::Cancelled => PipelineError::Cancelled,
-        other => PipelineError::Internal(other.to_string()),
-    })?)
+        Some(
+            evaluate(
+                &spec.display,
+                &encoded.light_field,
+                &spec.document,
+                OBJECTIVE_LEVEL,
+                &spec.target,
+                &labelled,
+                &eval_opts,
+                &|p| progress(0.9 * p),
+                cancel,
+            )
+            .map_err(|e| match e {
+                crate::evaluate::EvaluationError::Cancelled => PipelineError::Cancelled,
+                other => PipelineError::Internal(other.to_string()),
+            })?,
+        )
     };
     let manifest = crate::bundle::write_bundle(out_dir, &spec.display, &encoded.light_field, &meta, &[], 4)
         .map_err(|e| PipelineError::Internal(e.to_string()))?;

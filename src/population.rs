@@ -43,12 +43,20 @@ pub fn indiana_stats(pupil_diameter_mm: f64) -> Vec<TermStats> {
             let parse = |s: &str| s.trim().parse::<f64>().expect("shipped statistics are numeric");
             rows.push((
                 parse(f[0]),
-                TermStats { j: parse(f[1]) as usize, mean_um: parse(f[4]), sd_um: parse(f[5]) },
+                TermStats {
+                    j: parse(f[1]) as usize,
+                    mean_um: parse(f[4]),
+                    sd_um: parse(f[5]),
+                },
             ));
         }
         rows
     });
-    table.iter().filter(|(p, _)| (p - pupil_diameter_mm).abs() < 1e-6).map(|(_, t)| *t).collect()
+    table
+        .iter()
+        .filter(|(p, _)| (p - pupil_diameter_mm).abs() < 1e-6)
+        .map(|(_, t)| *t)
+        .collect()
 }
 
 /// Which terms a sampled person varies in.
@@ -66,13 +74,22 @@ pub struct SamplingScope {
 
 impl Default for SamplingScope {
     fn default() -> Self {
-        Self { residual_refraction: true, higher_order: true, spectral: true, pupil_spread: true }
+        Self {
+            residual_refraction: true,
+            higher_order: true,
+            spectral: true,
+            pupil_spread: true,
+        }
     }
 }
 
 /// Draws one person.
 pub fn sample_person<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope) -> VisionProfile {
-    let pupil = if scope.pupil_spread { rng.gen_range(4.0..=7.0) } else { 6.0 };
+    let pupil = if scope.pupil_spread {
+        rng.gen_range(4.0..=7.0)
+    } else {
+        6.0
+    };
     let table_pupil = if pupil > 6.0 { 7.5 } else { 6.0 };
     let mut c = vec![0.0; 28];
     for t in indiana_stats(table_pupil) {
@@ -126,7 +143,10 @@ mod tests {
     fn sampled_people_validate_and_have_realistic_higher_order_rms() {
         // Indiana: higher-order RMS (orders 3–7) 0.279 ± 0.121 µm at 6 mm. Sampled at a fixed 6 mm pupil with
         // independent terms, the mean RMS over orders 3–6 must land near it (within 25 %: no covariances).
-        let scope = SamplingScope { pupil_spread: false, ..Default::default() };
+        let scope = SamplingScope {
+            pupil_spread: false,
+            ..Default::default()
+        };
         let people = sample_population(400, 11, scope);
         let mut sum = 0.0;
         for p in &people {

@@ -83,7 +83,13 @@ pub struct SolverOptions {
 
 impl Default for SolverOptions {
     fn default() -> Self {
-        Self { max_iterations: 500, tolerance: 1e-6, patience: 5, power_iterations: 30, lipschitz: None }
+        Self {
+            max_iterations: 500,
+            tolerance: 1e-6,
+            patience: 5,
+            power_iterations: 30,
+            lipschitz: None,
+        }
     }
 }
 
@@ -145,7 +151,11 @@ pub fn estimate_lipschitz(obj: &dyn Objective, iterations: u32, seed: u64) -> f6
         }
         v.par_iter_mut().for_each(|x| *x /= nv as f32);
         obj.curvature_product(&v, &mut hv);
-        lambda = v.par_iter().zip(hv.par_iter()).map(|(a, b)| *a as f64 * *b as f64).sum::<f64>();
+        lambda = v
+            .par_iter()
+            .zip(hv.par_iter())
+            .map(|(a, b)| *a as f64 * *b as f64)
+            .sum::<f64>();
         std::mem::swap(&mut v, &mut hv);
     }
     lambda.abs().max(1e-12) * 1.1
@@ -166,7 +176,9 @@ pub fn minimise(
     let start = Instant::now();
     let n = obj.dim();
     assert_eq!(x0.len(), n, "warm start length");
-    let lipschitz = options.lipschitz.unwrap_or_else(|| estimate_lipschitz(obj, options.power_iterations, 12345));
+    let lipschitz = options
+        .lipschitz
+        .unwrap_or_else(|| estimate_lipschitz(obj, options.power_iterations, 12345));
     let step = (1.0 / lipschitz) as f32;
     let project = |v: f32| v.clamp(lower, upper);
     let mut x: Vec<f32> = x0.into_par_iter().map(project).collect();
@@ -191,9 +203,12 @@ pub fn minimise(
             break;
         }
         // Projected gradient step from the extrapolated point y.
-        x_new.par_iter_mut().zip(y.par_iter().zip(grad.par_iter())).for_each(|(xn, (yi, gi))| {
-            *xn = project(yi - step * gi);
-        });
+        x_new
+            .par_iter_mut()
+            .zip(y.par_iter().zip(grad.par_iter()))
+            .for_each(|(xn, (yi, gi))| {
+                *xn = project(yi - step * gi);
+            });
         // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded.
         let uphill: f64 = grad
             .par_iter()
@@ -212,16 +227,22 @@ pub fn minimise(
         }
         let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
         let beta = ((t - 1.0) / t_next) as f32;
-        y.par_iter_mut().zip(x_new.par_iter().zip(x.par_iter())).for_each(|(yi, (a, b))| {
-            *yi = project(a + beta * (a - b));
-        });
+        y.par_iter_mut()
+            .zip(x_new.par_iter().zip(x.par_iter()))
+            .for_each(|(yi, (a, b))| {
+                *yi = project(a + beta * (a - b));
+            });
         std::mem::swap(&mut x, &mut x_new);
         t = t_next;
         iterations = k + 1;
         let f_prev = f_x;
         f_x = f_y;
         history.push(f_y);
-        progress(Progress { iteration: iterations, max_iterations: options.max_iterations, objective: f_y });
+        progress(Progress {
+            iteration: iterations,
+            max_iterations: options.max_iterations,
+            objective: f_y,
+        });
         if f_prev.is_finite() && (f_prev - f_y).abs() <= options.tolerance * f_y.abs().max(1e-30) {
             calm += 1;
             if calm >= options.patience {
@@ -299,7 +320,9 @@ mod tests {
 
     fn problem(rows: usize, cols: usize, seed: u64) -> DenseLs {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let m = (0..rows).map(|_| (0..cols).map(|_| rng.gen::<f64>() - 0.3).collect()).collect();
+        let m = (0..rows)
+            .map(|_| (0..cols).map(|_| rng.gen::<f64>() - 0.3).collect())
+            .collect();
         let b = (0..rows).map(|_| 2.0 * rng.gen::<f64>() - 0.5).collect();
         DenseLs { m, b }
     }
@@ -328,17 +351,31 @@ mod tests {
     #[test]
     fn kkt_conditions_hold_and_an_independent_solver_agrees() {
         let p = problem(40, 25, 3);
-        let opts = SolverOptions { max_iterations: 20000, tolerance: 1e-12, patience: 20, ..Default::default() };
+        let opts = SolverOptions {
+            max_iterations: 20000,
+            tolerance: 1e-12,
+            patience: 20,
+            ..Default::default()
+        };
         let r = minimise(&p, vec![0.5; 25], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false));
         // f32 iterates: first-order conditions to 1e-3 of the gradient scale.
-        assert!(kkt_violation(&p, &r.x, 0.0, 1.0) < 1e-3, "kkt {}", kkt_violation(&p, &r.x, 0.0, 1.0));
+        assert!(
+            kkt_violation(&p, &r.x, 0.0, 1.0) < 1e-3,
+            "kkt {}",
+            kkt_violation(&p, &r.x, 0.0, 1.0)
+        );
         let reference = coordinate_descent(&p, 0.0, 1.0);
         let f_ref = {
             let xr: Vec<f32> = reference.iter().map(|v| *v as f32).collect();
             p.value(&xr)
         };
         // The problem is strictly convex (40 rows, 25 columns): same minimiser, same objective.
-        assert!((r.objective - f_ref).abs() <= 1e-4 * f_ref.abs().max(1.0), "{} vs {}", r.objective, f_ref);
+        assert!(
+            (r.objective - f_ref).abs() <= 1e-4 * f_ref.abs().max(1.0),
+            "{} vs {}",
+            r.objective,
+            f_ref
+        );
         for (a, b) in r.x.iter().zip(&reference) {
             assert!((*a as f64 - b).abs() < 2e-3, "{a} vs {b}");
         }
@@ -350,7 +387,15 @@ mod tests {
     fn objective_history_never_rises_much_and_progress_is_reported() {
         let p = problem(60, 30, 9);
         let mut calls = 0;
-        let r = minimise(&p, vec![0.0; 30], 0.0, 1.0, &SolverOptions::default(), &mut |_| calls += 1, &AtomicBool::new(false));
+        let r = minimise(
+            &p,
+            vec![0.0; 30],
+            0.0,
+            1.0,
+            &SolverOptions::default(),
+            &mut |_| calls += 1,
+            &AtomicBool::new(false),
+        );
         assert_eq!(calls as u32, r.iterations);
         assert_eq!(r.history.len() as u32, r.iterations);
         assert!(r.history.last().unwrap() < &r.history[0]);
@@ -359,7 +404,15 @@ mod tests {
     #[test]
     fn cancel_stops_before_the_first_iteration() {
         let p = problem(10, 5, 1);
-        let r = minimise(&p, vec![0.0; 5], 0.0, 1.0, &SolverOptions::default(), &mut |_| {}, &AtomicBool::new(true));
+        let r = minimise(
+            &p,
+            vec![0.0; 5],
+            0.0,
+            1.0,
+            &SolverOptions::default(),
+            &mut |_| {},
+            &AtomicBool::new(true),
+        );
         assert_eq!(r.termination, Termination::Cancelled);
         assert_eq!(r.iterations, 0);
     }
@@ -372,8 +425,13 @@ mod tests {
         let mut v = vec![1.0f64; n];
         let mut lam = 0.0;
         for _ in 0..500 {
-            let mv: Vec<f64> = p.m.iter().map(|row| row.iter().zip(&v).map(|(a, b)| a * b).sum()).collect();
-            let w: Vec<f64> = (0..n).map(|j| 2.0 * p.m.iter().zip(&mv).map(|(row, m)| row[j] * m).sum::<f64>()).collect();
+            let mv: Vec<f64> =
+                p.m.iter()
+                    .map(|row| row.iter().zip(&v).map(|(a, b)| a * b).sum())
+                    .collect();
+            let w: Vec<f64> = (0..n)
+                .map(|j| 2.0 * p.m.iter().zip(&mv).map(|(row, m)| row[j] * m).sum::<f64>())
+                .collect();
             lam = w.iter().zip(&v).map(|(a, b)| a * b).sum::<f64>() / v.iter().map(|a| a * a).sum::<f64>();
             let nw = w.iter().map(|a| a * a).sum::<f64>().sqrt();
             v = w.iter().map(|a| a / nw).collect();

@@ -174,21 +174,13 @@ fn parse_grid_csv(name: &str, text: &str, header: &str) -> Vec<Vec<Option<f64>>>
                     })
                 })
                 .collect();
-            assert_eq!(
-                cells.len(),
-                n_cols,
-                "{name}: wrong column count in {line:?}"
-            );
+            assert_eq!(cells.len(), n_cols, "{name}: wrong column count in {line:?}");
             cells
         })
         .collect();
     assert_eq!(rows.len(), N_WAVELENGTHS, "{name}: wrong row count");
     for (row, lambda) in rows.iter().zip(wavelengths_nm()) {
-        assert_eq!(
-            row[0],
-            Some(lambda),
-            "{name}: wavelength column is not the grid"
-        );
+        assert_eq!(row[0], Some(lambda), "{name}: wavelength column is not the grid");
     }
     rows
 }
@@ -437,12 +429,7 @@ impl ObserverParameters {
     /// density deviations −100..=300 %, shifts −15..=15 nm. The error names the field, e.g.
     /// "age_years must be within 10..=90, got 120".
     pub fn validate(&self) -> Result<(), SpectralError> {
-        check_range(
-            "age_years",
-            self.age_years,
-            AGE_RANGE_YEARS.0,
-            AGE_RANGE_YEARS.1,
-        )?;
+        check_range("age_years", self.age_years, AGE_RANGE_YEARS.0, AGE_RANGE_YEARS.1)?;
         check_range(
             "field_size_deg",
             self.field_size_deg,
@@ -508,8 +495,7 @@ impl ObserverParameters {
         let age_factor = lens_age_factor(self.age_years);
         let lens_scale = scale(self.od_lens_pct);
 
-        let mut channels: [Vec<f64>; 3] =
-            std::array::from_fn(|_| Vec::with_capacity(N_WAVELENGTHS));
+        let mut channels: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(N_WAVELENGTHS));
         for (k, lambda) in wavelengths_nm().enumerate() {
             let d_ocul = (t.d_ocul1_32[k] * age_factor + t.d_ocul2[k]) * lens_scale;
             let prereceptoral = 10f64.powf(-d_mac * t.d_macula_rel[k] - d_ocul);
@@ -656,11 +642,7 @@ fn resample_onto_grid(wavelengths: &[f64], values: &[f64]) -> Vec<f64> {
                 return value(wavelengths.len() - 1);
             }
             let (w0, w1) = (wavelengths[j - 1], wavelengths[j]);
-            let frac = if w1 > w0 {
-                (lambda - w0) / (w1 - w0)
-            } else {
-                0.0
-            };
+            let frac = if w1 > w0 { (lambda - w0) / (w1 - w0) } else { 0.0 };
             value(j - 1) + frac * (value(j) - value(j - 1))
         })
         .collect()
@@ -734,9 +716,7 @@ impl SpectralSensitivity {
                 for (name, values) in columns {
                     let on_grid = resample_onto_grid(wavelengths_nm, values);
                     if !on_grid.iter().any(|&v| v > 0.0) {
-                        return Err(SpectralError::NoSensitivityOnGrid {
-                            field: name.to_owned(),
-                        });
+                        return Err(SpectralError::NoSensitivityOnGrid { field: name.to_owned() });
                     }
                 }
                 Ok(())
@@ -819,10 +799,7 @@ impl ProjectorSpectrum {
                 let total = sigma * (2.0 * std::f64::consts::PI).sqrt();
                 ("centre_nm", grid_integral(&values) / total)
             }
-            Self::Sampled {
-                wavelengths_nm,
-                power,
-            } => {
+            Self::Sampled { wavelengths_nm, power } => {
                 validate_table(wavelengths_nm, &[("power", power)])?;
                 let total = trapezoid(wavelengths_nm, power);
                 let on_grid = grid_integral(&resample_onto_grid(wavelengths_nm, power));
@@ -847,10 +824,7 @@ impl ProjectorSpectrum {
     pub fn power_on_grid(&self) -> Vec<f64> {
         let mut values = match self {
             Self::Gaussian { centre_nm, fwhm_nm } => gaussian_on_grid(*centre_nm, *fwhm_nm).0,
-            Self::Sampled {
-                wavelengths_nm,
-                power,
-            } => resample_onto_grid(wavelengths_nm, power),
+            Self::Sampled { wavelengths_nm, power } => resample_onto_grid(wavelengths_nm, power),
         };
         let total = grid_integral(&values);
         if total > 0.0 && total.is_finite() {
@@ -882,9 +856,9 @@ impl Coupling {
 
     /// LMS of the display's white, all projectors at L_max: Σ_n c_n (Eq. 12 with I_n = 1).
     pub fn white_lms(&self) -> [f64; 3] {
-        self.c.iter().fold([0.0; 3], |acc, row| {
-            [acc[0] + row[0], acc[1] + row[1], acc[2] + row[2]]
-        })
+        self.c
+            .iter()
+            .fold([0.0; 3], |acc, row| [acc[0] + row[0], acc[1] + row[1], acc[2] + row[2]])
     }
 }
 
@@ -904,8 +878,7 @@ pub fn coupling(projectors: &[ProjectorSpectrum], cones: &ConeFundamentals) -> C
         .iter()
         .map(|projector| {
             let power = projector.power_on_grid();
-            channels
-                .map(|x| power.iter().zip(x).map(|(e, x)| e * x).sum::<f64>() * WAVELENGTH_STEP_NM)
+            channels.map(|x| power.iter().zip(x).map(|(e, x)| e * x).sum::<f64>() * WAVELENGTH_STEP_NM)
         })
         .collect();
     Coupling { c }
@@ -957,8 +930,7 @@ fn mat_vec(a: &Mat3, v: [f64; 3]) -> [f64; 3] {
 
 /// Inverse of a well-conditioned constant 3×3 matrix (adjugate / determinant).
 fn mat_inverse(a: &Mat3) -> Mat3 {
-    let cof =
-        |r0: usize, r1: usize, c0: usize, c1: usize| a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0];
+    let cof = |r0: usize, r1: usize, c0: usize, c1: usize| a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0];
     let adj = [
         [cof(1, 2, 1, 2), -cof(0, 2, 1, 2), cof(0, 1, 1, 2)],
         [-cof(1, 2, 0, 2), cof(0, 2, 0, 2), -cof(0, 1, 0, 2)],
@@ -1157,10 +1129,7 @@ mod tests {
         println!("L peak moved by {moved:.3} nm");
         assert!((moved - 5.0).abs() <= 1.0, "L peak moved by {moved} nm");
         // M is untouched by an L shift (exact: same arithmetic).
-        assert_eq!(
-            shifted.m,
-            ObserverParameters::default().cone_fundamentals().m
-        );
+        assert_eq!(shifted.m, ObserverParameters::default().cone_fundamentals().m);
     }
 
     #[test]
@@ -1173,9 +1142,7 @@ mod tests {
             }
             .cone_fundamentals()
             .s;
-            let first_zero = wavelengths_nm()
-                .position(|lambda| lambda - shift_s_nm > 615.0)
-                .unwrap();
+            let first_zero = wavelengths_nm().position(|lambda| lambda - shift_s_nm > 615.0).unwrap();
             assert!(s[first_zero..].iter().all(|&v| v == 0.0));
             assert!(s[first_zero - 1] > 0.0);
             assert!(s.iter().all(|v| v.is_finite()));
@@ -1199,9 +1166,7 @@ mod tests {
     #[test]
     fn extreme_valid_parameters_give_finite_fundamentals() {
         // Finite and peak 1: the validated corners of the parameter box must not break the model.
-        for (age_years, field_size_deg, pct, shift) in
-            [(10.0, 1.0, -100.0, -15.0), (90.0, 10.0, 300.0, 15.0)]
-        {
+        for (age_years, field_size_deg, pct, shift) in [(10.0, 1.0, -100.0, -15.0), (90.0, 10.0, 300.0, 15.0)] {
             let p = ObserverParameters {
                 age_years,
                 field_size_deg,
@@ -1245,10 +1210,7 @@ mod tests {
             };
             p.validate().unwrap();
             let cones = p.cone_fundamentals();
-            assert!(cones
-                .channels()
-                .iter()
-                .all(|c| c.iter().all(|v| v.is_finite())));
+            assert!(cones.channels().iter().all(|c| c.iter().all(|v| v.is_finite())));
         }
     }
 
@@ -1276,11 +1238,10 @@ mod tests {
         // Gaussian against linearly interpolated fundamentals differs from the 1-nm rectangle rule
         // only by interpolation error.
         let cones = stockman_sharpe_2deg();
-        let projectors: Vec<ProjectorSpectrum> =
-            [(450.0, 20.0), (520.0, 10.0), (590.0, 40.0), (640.0, 20.0)]
-                .into_iter()
-                .map(|(centre_nm, fwhm_nm)| ProjectorSpectrum::Gaussian { centre_nm, fwhm_nm })
-                .collect();
+        let projectors: Vec<ProjectorSpectrum> = [(450.0, 20.0), (520.0, 10.0), (590.0, 40.0), (640.0, 20.0)]
+            .into_iter()
+            .map(|(centre_nm, fwhm_nm)| ProjectorSpectrum::Gaussian { centre_nm, fwhm_nm })
+            .collect();
         let c = coupling(&projectors, cones);
         assert_eq!(c.n_bands(), 4);
         for (projector, row) in projectors.iter().zip(&c.c) {
@@ -1434,9 +1395,7 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(ASANO_JSON).unwrap();
         let expected = &json["sd_scaled_step2"]["values_exact"];
         let mut rng = StdRng::seed_from_u64(2016);
-        let samples: Vec<ObserverParameters> = (0..2000)
-            .map(|_| sample_observer_parameters(&mut rng))
-            .collect();
+        let samples: Vec<ObserverParameters> = (0..2000).map(|_| sample_observer_parameters(&mut rng)).collect();
         for s in &samples {
             s.validate().unwrap();
             assert_eq!(s.field_size_deg, 2.0);
@@ -1456,8 +1415,7 @@ mod tests {
         let n = samples.len() as f64;
         for (key, get) in fields {
             let mean = samples.iter().map(get).sum::<f64>() / n;
-            let sd =
-                (samples.iter().map(|p| (get(p) - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            let sd = (samples.iter().map(|p| (get(p) - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
             let want = expected[key].as_f64().unwrap();
             assert!((sd / want - 1.0).abs() < 0.1, "{key}: sd {sd} vs {want}");
             // Mean 0 within 5 standard errors.
@@ -1524,19 +1482,16 @@ mod tests {
 
         let grid: Vec<f64> = (0..12).map(|i| 400.0 + 10.0 * i as f64).collect();
         let ones = vec![1.0; 12];
-        let table =
-            |w: Vec<f64>, l: Vec<f64>, m: Vec<f64>, s: Vec<f64>| SpectralSensitivity::Table {
-                wavelengths_nm: w,
-                l,
-                m,
-                s,
-            };
+        let table = |w: Vec<f64>, l: Vec<f64>, m: Vec<f64>, s: Vec<f64>| SpectralSensitivity::Table {
+            wavelengths_nm: w,
+            l,
+            m,
+            s,
+        };
         let err = |t: SpectralSensitivity| t.validate().unwrap_err().to_string();
-        assert!(
-            table(grid.clone(), ones.clone(), ones.clone(), ones.clone())
-                .validate()
-                .is_ok()
-        );
+        assert!(table(grid.clone(), ones.clone(), ones.clone(), ones.clone())
+            .validate()
+            .is_ok());
         assert_eq!(
             err(table(
                 grid[..5].to_vec(),
@@ -1547,20 +1502,12 @@ mod tests {
             "wavelengths_nm needs at least 10 samples, got 5"
         );
         assert_eq!(
-            err(table(
-                grid.clone(),
-                ones.clone(),
-                ones[..11].to_vec(),
-                ones.clone()
-            )),
+            err(table(grid.clone(), ones.clone(), ones[..11].to_vec(), ones.clone())),
             "m has 11 samples but wavelengths_nm has 12"
         );
         let mut unsorted = grid.clone();
         unsorted.swap(3, 4);
-        assert!(
-            err(table(unsorted, ones.clone(), ones.clone(), ones.clone()))
-                .starts_with("wavelengths_nm[4]")
-        );
+        assert!(err(table(unsorted, ones.clone(), ones.clone(), ones.clone())).starts_with("wavelengths_nm[4]"));
         let mut wide = grid.clone();
         wide[11] = 900.0;
         assert!(err(table(wide, ones.clone(), ones.clone(), ones.clone()))
@@ -1573,15 +1520,9 @@ mod tests {
         );
         let mut nan = ones.clone();
         nan[0] = f64::NAN;
-        assert!(err(table(grid.clone(), nan, ones.clone(), ones.clone()))
-            .starts_with("l[0] must be finite"));
+        assert!(err(table(grid.clone(), nan, ones.clone(), ones.clone())).starts_with("l[0] must be finite"));
         assert_eq!(
-            err(table(
-                grid.clone(),
-                ones.clone(),
-                vec![0.0; 12],
-                ones.clone()
-            )),
+            err(table(grid.clone(), ones.clone(), vec![0.0; 12], ones.clone())),
             "m must be positive somewhere within 390..=830 nm"
         );
 
@@ -1607,11 +1548,7 @@ mod tests {
             wavelengths_nm: (0..10).map(|i| 360.0 + 2.0 * i as f64).collect(),
             power: vec![1.0; 10],
         };
-        assert!(sampled
-            .validate()
-            .unwrap_err()
-            .to_string()
-            .starts_with("power: only"));
+        assert!(sampled.validate().unwrap_err().to_string().starts_with("power: only"));
         let short_power = ProjectorSpectrum::Sampled {
             wavelengths_nm: grid.clone(),
             power: vec![1.0; 3],
@@ -1666,8 +1603,7 @@ mod tests {
     fn json_forms_round_trip() {
         // Exact: serde must accept the documented JSON and reject unknown fields.
         let p: SpectralSensitivity =
-            serde_json::from_str(r#"{"kind":"parameters","age_years":50,"shift_l_nm":1.5}"#)
-                .unwrap();
+            serde_json::from_str(r#"{"kind":"parameters","age_years":50,"shift_l_nm":1.5}"#).unwrap();
         assert_eq!(
             p,
             SpectralSensitivity::Parameters(ObserverParameters {
@@ -1676,42 +1612,28 @@ mod tests {
                 ..Default::default()
             })
         );
-        let default: SpectralSensitivity =
-            serde_json::from_str(r#"{"kind":"parameters"}"#).unwrap();
+        let default: SpectralSensitivity = serde_json::from_str(r#"{"kind":"parameters"}"#).unwrap();
         assert_eq!(default, SpectralSensitivity::default());
         let json = serde_json::to_string(&p).unwrap();
-        assert!(
-            json.starts_with(r#"{"kind":"parameters","age_years":50.0"#),
-            "{json}"
-        );
-        assert_eq!(
-            serde_json::from_str::<SpectralSensitivity>(&json).unwrap(),
-            p
-        );
-        assert!(
-            serde_json::from_str::<SpectralSensitivity>(r#"{"kind":"parameters","age":50}"#)
-                .is_err()
-        );
+        assert!(json.starts_with(r#"{"kind":"parameters","age_years":50.0"#), "{json}");
+        assert_eq!(serde_json::from_str::<SpectralSensitivity>(&json).unwrap(), p);
+        assert!(serde_json::from_str::<SpectralSensitivity>(r#"{"kind":"parameters","age":50}"#).is_err());
         assert!(serde_json::from_str::<SpectralSensitivity>(
             r#"{"kind":"table","wavelengths_nm":[400],"l":[1],"m":[1],"s":[1],"x":[1]}"#
         )
         .is_err());
-        let t: SpectralSensitivity = serde_json::from_str(
-            r#"{"kind":"table","wavelengths_nm":[400],"l":[1],"m":[1],"s":[1]}"#,
-        )
-        .unwrap();
+        let t: SpectralSensitivity =
+            serde_json::from_str(r#"{"kind":"table","wavelengths_nm":[400],"l":[1],"m":[1],"s":[1]}"#).unwrap();
         assert!(matches!(t, SpectralSensitivity::Table { .. }));
 
-        let g: ProjectorSpectrum =
-            serde_json::from_str(r#"{"kind":"gaussian","centre_nm":450,"fwhm_nm":20}"#).unwrap();
+        let g: ProjectorSpectrum = serde_json::from_str(r#"{"kind":"gaussian","centre_nm":450,"fwhm_nm":20}"#).unwrap();
         assert_eq!(g, paper_projectors()[0]);
         assert!(serde_json::from_str::<ProjectorSpectrum>(
             r#"{"kind":"gaussian","centre_nm":450,"fwhm_nm":20,"peak":1}"#
         )
         .is_err());
         let s: ProjectorSpectrum =
-            serde_json::from_str(r#"{"kind":"sampled","wavelengths_nm":[400,410],"power":[1,2]}"#)
-                .unwrap();
+            serde_json::from_str(r#"{"kind":"sampled","wavelengths_nm":[400,410],"power":[1,2]}"#).unwrap();
         assert_eq!(
             serde_json::from_str::<ProjectorSpectrum>(&serde_json::to_string(&s).unwrap()).unwrap(),
             s

@@ -106,7 +106,12 @@ pub struct TransportOptions {
 
 impl Default for TransportOptions {
     fn default() -> Self {
-        Self { sub_rays: 16, seed: 7, retina_oversample: 1, derivative_terms: Vec::new() }
+        Self {
+            sub_rays: 16,
+            seed: 7,
+            retina_oversample: 1,
+            derivative_terms: Vec::new(),
+        }
     }
 }
 
@@ -156,7 +161,16 @@ impl CsrMatrix {
                 map[dst] = e as u32;
             }
         }
-        (CsrMatrix { n_rows: self.n_cols, n_cols: self.n_rows, indptr, indices, values }, map)
+        (
+            CsrMatrix {
+                n_rows: self.n_cols,
+                n_cols: self.n_rows,
+                indptr,
+                indices,
+                values,
+            },
+            map,
+        )
     }
 }
 
@@ -198,34 +212,42 @@ fn spmv_fixed<const NI: usize>(
     out: &mut [f32],
     n_out: usize,
 ) {
-    let n_in = if NI < 16 { NI } else if transpose_mix { 3 } else { mix.len() };
-    out.par_chunks_mut(ROWS_PER_TASK * n_out).enumerate().for_each(|(chunk, out_rows)| {
-        let first = chunk * ROWS_PER_TASK;
-        for (k, o) in out_rows.chunks_exact_mut(n_out).enumerate() {
-            let r = first + k;
-            let mut acc = [0f32; NI];
-            let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
-            for e in a..b {
-                let v = values[e];
-                let base = indices[e] as usize * n_in;
-                let xs = &x[base..base + n_in];
-                for (slot, xv) in acc.iter_mut().zip(xs) {
-                    *slot += v * xv;
+    let n_in = if NI < 16 {
+        NI
+    } else if transpose_mix {
+        3
+    } else {
+        mix.len()
+    };
+    out.par_chunks_mut(ROWS_PER_TASK * n_out)
+        .enumerate()
+        .for_each(|(chunk, out_rows)| {
+            let first = chunk * ROWS_PER_TASK;
+            for (k, o) in out_rows.chunks_exact_mut(n_out).enumerate() {
+                let r = first + k;
+                let mut acc = [0f32; NI];
+                let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
+                for e in a..b {
+                    let v = values[e];
+                    let base = indices[e] as usize * n_in;
+                    let xs = &x[base..base + n_in];
+                    for (slot, xv) in acc.iter_mut().zip(xs) {
+                        *slot += v * xv;
+                    }
+                }
+                if transpose_mix {
+                    // Adjoint: out_n = Σ_a c[n][a] acc_a.
+                    for (slot, m) in o.iter_mut().zip(mix) {
+                        *slot = m[0] * acc[0] + m[1] * acc[1] + m[2] * acc[2];
+                    }
+                } else {
+                    // Forward: out_a = Σ_n c[n][a] acc_n.
+                    for (a, slot) in o.iter_mut().enumerate() {
+                        *slot = mix.iter().zip(&acc).map(|(m, v)| m[a] * v).sum();
+                    }
                 }
             }
-            if transpose_mix {
-                // Adjoint: out_n = Σ_a c[n][a] acc_a.
-                for (slot, m) in o.iter_mut().zip(mix) {
-                    *slot = m[0] * acc[0] + m[1] * acc[1] + m[2] * acc[2];
-                }
-            } else {
-                // Forward: out_a = Σ_n c[n][a] acc_n.
-                for (a, slot) in o.iter_mut().enumerate() {
-                    *slot = mix.iter().zip(&acc).map(|(m, v)| m[a] * v).sum();
-                }
-            }
-        }
-    });
+        });
 }
 
 /// One observer's light-transport operator T (Eqs. 10, 11, 13) and, optionally, ∂T/∂W_j.
@@ -334,8 +356,11 @@ impl TransportMatrix {
         let grid = RetinalGrid::for_display(display, options.retina_oversample);
         let r_p = wavefront.pupil_radius_mm();
         let poly = wavefront.polynomial();
-        let term_polys: Vec<ZernikePolynomial> =
-            options.derivative_terms.iter().map(|&j| ZernikePolynomial::single_term(j)).collect();
+        let term_polys: Vec<ZernikePolynomial> = options
+            .derivative_terms
+            .iter()
+            .map(|&j| ZernikePolynomial::single_term(j))
+            .collect();
         // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
         let shift_per_grad = d_eye * 1e-3 / grid.pixel_mm / r_p;
         let n_holes = (display.holes_x * display.holes_y) as usize;
@@ -497,11 +522,18 @@ impl TransportMatrix {
                 }
             }
         }
-        let adjoint =
-            CsrMatrix { n_rows: n_cols, n_cols: grid.len(), indptr: counts, indices: t_indices, values: t_values };
+        let adjoint = CsrMatrix {
+            n_rows: n_cols,
+            n_cols: grid.len(),
+            indptr: counts,
+            indices: t_indices,
+            values: t_values,
+        };
         let (forward, map) = adjoint.transpose_with_map();
-        let derivative_forward =
-            t_dvalues.iter().map(|dv| map.iter().map(|&m| dv[m as usize]).collect()).collect();
+        let derivative_forward = t_dvalues
+            .iter()
+            .map(|dv| map.iter().map(|&m| dv[m as usize]).collect())
+            .collect();
         Ok(Self {
             grid,
             forward,
@@ -533,7 +565,12 @@ impl TransportMatrix {
         let m = |c: &CsrMatrix| c.indptr.len() * 4 + c.indices.len() * 4 + c.values.len() * 4;
         m(&self.forward)
             + m(&self.adjoint)
-            + 4 * self.derivative_forward.iter().chain(&self.derivative_adjoint).map(Vec::len).sum::<usize>()
+            + 4 * self
+                .derivative_forward
+                .iter()
+                .chain(&self.derivative_adjoint)
+                .map(Vec::len)
+                .sum::<usize>()
     }
 
     /// S = (C ⊗ T)·L (Eq. 13): `l[p·N + n]` → `out[r·3 + a]`. `coupling[n][a]` = c_na.
@@ -690,11 +727,15 @@ pub fn plain_light_field(display: &DisplayGeometry, per_hole: &[f32]) -> Vec<f32
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
     use crate::optics::zernike::Prescription;
+    use rand::{Rng, SeedableRng};
 
     fn tiny() -> DisplayGeometry {
-        DisplayGeometry { holes_x: 16, holes_y: 12, ..DisplayGeometry::paper() }
+        DisplayGeometry {
+            holes_x: 16,
+            holes_y: 12,
+            ..DisplayGeometry::paper()
+        }
     }
 
     fn coupling4() -> Vec<[f32; 3]> {
@@ -725,17 +766,26 @@ mod tests {
         let d = tiny();
         let cache = TransportCache::new(64 << 20);
         let w = aberrated(6.0);
-        let a = cache.get_or_build(&d, &w, EyePosition::default(), &Default::default()).unwrap();
-        let b = cache.get_or_build(&d, &w, EyePosition::default(), &Default::default()).unwrap();
+        let a = cache
+            .get_or_build(&d, &w, EyePosition::default(), &Default::default())
+            .unwrap();
+        let b = cache
+            .get_or_build(&d, &w, EyePosition::default(), &Default::default())
+            .unwrap();
         assert!(std::sync::Arc::ptr_eq(&a, &b));
-        let moved = EyePosition { x_mm: 1.0, ..Default::default() };
+        let moved = EyePosition {
+            x_mm: 1.0,
+            ..Default::default()
+        };
         let c = cache.get_or_build(&d, &w, moved, &Default::default()).unwrap();
         assert!(!std::sync::Arc::ptr_eq(&a, &c));
         assert_eq!(cache.stats().0, 1);
         // A bound smaller than one operator evicts everything and caches nothing more.
         cache.set_capacity_bytes(1);
         assert_eq!(cache.stats().2, 0);
-        let d2 = cache.get_or_build(&d, &w, EyePosition::default(), &Default::default()).unwrap();
+        let d2 = cache
+            .get_or_build(&d, &w, EyePosition::default(), &Default::default())
+            .unwrap();
         assert!(!std::sync::Arc::ptr_eq(&a, &d2));
         assert_eq!(cache.stats().2, 0);
     }
@@ -744,7 +794,10 @@ mod tests {
     fn adjoint_identity_holds() {
         // ⟨A L, y⟩ = ⟨L, Aᵀ y⟩ for random L, y; f32 accumulation: relative 1e-5.
         let d = tiny();
-        let opts = TransportOptions { derivative_terms: vec![4, 7], ..Default::default() };
+        let opts = TransportOptions {
+            derivative_terms: vec![4, 7],
+            ..Default::default()
+        };
         let t = TransportMatrix::build(&d, &aberrated(6.0), EyePosition::default(), &opts).unwrap();
         let c = coupling4();
         let l = rand_vec(t.n_samples() * 4, 1);
@@ -759,17 +812,28 @@ mod tests {
             t.derivative_forward_lms(k, &l, &c, &mut al);
             t.derivative_adjoint_lms(k, &y, &c, &mut aty);
             let (lhs, rhs) = (dot(&al, &y), dot(&l, &aty));
-            assert!((lhs - rhs).abs() <= 1e-4 * lhs.abs().max(1e-3), "term {k}: {lhs} vs {rhs}");
+            assert!(
+                (lhs - rhs).abs() <= 1e-4 * lhs.abs().max(1e-3),
+                "term {k}: {lhs} vs {rhs}"
+            );
         }
     }
 
     #[test]
     fn perfect_eye_sees_a_plain_image_sharp_and_at_its_own_brightness() {
         let d = tiny();
-        let t = TransportMatrix::build(&d, &ZernikeCoefficients::zero(6.0), EyePosition::default(), &Default::default())
-            .unwrap();
+        let t = TransportMatrix::build(
+            &d,
+            &ZernikeCoefficients::zero(6.0),
+            EyePosition::default(),
+            &Default::default(),
+        )
+        .unwrap();
         let ident: Vec<[f32; 3]> = vec![[1.0, 0.0, 0.0]];
-        let d1 = DisplayGeometry { projectors: d.projectors[..1].to_vec(), ..d.clone() };
+        let d1 = DisplayGeometry {
+            projectors: d.projectors[..1].to_vec(),
+            ..d.clone()
+        };
         // A uniform plain image is seen at its own intensity away from the border: each hole's light sums to
         // exactly its value; what the jittered splats exchange with the neighbours balances only on average
         // (Monte-Carlo noise of 400 sub-rays per hole): within 1 %.
@@ -784,8 +848,9 @@ mod tests {
         }
         // A checkerboard of holes: a perfect eye resolves it. Each landing lies within the hole aperture
         // (±0.04 mm = ±0.1 pixel), so the bilinear splat spills at most 10 % into the neighbours.
-        let per_hole: Vec<f32> =
-            (0..d.holes_x * d.holes_y).map(|h| ((h % d.holes_x + h / d.holes_x) % 2) as f32).collect();
+        let per_hole: Vec<f32> = (0..d.holes_x * d.holes_y)
+            .map(|h| ((h % d.holes_x + h / d.holes_x) % 2) as f32)
+            .collect();
         let l = plain_light_field(&d1, &per_hole);
         let mut out = vec![0f32; t.n_pixels() * 3];
         t.forward_lms(&l, &ident, &mut out);
@@ -793,7 +858,11 @@ mod tests {
             for x in 1..d.holes_x - 1 {
                 let h = (y * d.holes_x + x) as usize;
                 let seen = out[h * 3];
-                assert!((seen - per_hole[h]).abs() < 0.1, "hole ({x},{y}): {seen} vs {}", per_hole[h]);
+                assert!(
+                    (seen - per_hole[h]).abs() < 0.1,
+                    "hole ({x},{y}): {seen} vs {}",
+                    per_hole[h]
+                );
             }
         }
         // Every hole sends light into the pupil (the blocks are aimed at the design eye).
@@ -805,14 +874,29 @@ mod tests {
         // One bright hole seen with 1 D of defocus: the blur disc on the display plane has diameter
         // d·D·ΔD = 500 mm × 6 mm × 1 D / 1000 = 3.0 mm. Measure it as the second moment: a uniform disc of
         // diameter b has ⟨r²⟩ = b²/8 (plus the hole and view-bin spread, which is small). Within 10 %.
-        let d = DisplayGeometry { holes_x: 31, holes_y: 31, ..DisplayGeometry::paper() };
+        let d = DisplayGeometry {
+            holes_x: 31,
+            holes_y: 31,
+            ..DisplayGeometry::paper()
+        };
         let w = ZernikeCoefficients::from_prescription(
-            &Prescription { sphere_d: -1.0, cylinder_d: 0.0, axis_deg: 0.0 },
+            &Prescription {
+                sphere_d: -1.0,
+                cylinder_d: 0.0,
+                axis_deg: 0.0,
+            },
             6.0,
         );
-        let opts = TransportOptions { sub_rays: 64, retina_oversample: 4, ..Default::default() };
+        let opts = TransportOptions {
+            sub_rays: 64,
+            retina_oversample: 4,
+            ..Default::default()
+        };
         let t = TransportMatrix::build(&d, &w, EyePosition::default(), &opts).unwrap();
-        let d1 = DisplayGeometry { projectors: d.projectors[..1].to_vec(), ..d.clone() };
+        let d1 = DisplayGeometry {
+            projectors: d.projectors[..1].to_vec(),
+            ..d.clone()
+        };
         let mut per_hole = vec![0f32; (d.holes_x * d.holes_y) as usize];
         per_hole[(15 * d.holes_x + 15) as usize] = 1.0;
         let l = plain_light_field(&d1, &per_hole);
@@ -840,9 +924,14 @@ mod tests {
         // 6 mm one, in proportion to the overlap of the view fan with the pupil disc, and never all.
         let d = tiny();
         let build = |p: f64| {
-            TransportMatrix::build(&d, &ZernikeCoefficients::zero(p), EyePosition::default(), &Default::default())
-                .unwrap()
-                .stats
+            TransportMatrix::build(
+                &d,
+                &ZernikeCoefficients::zero(p),
+                EyePosition::default(),
+                &Default::default(),
+            )
+            .unwrap()
+            .stats
         };
         let (small, large) = (build(3.0), build(6.0));
         assert_eq!(small.sub_rays_traced, large.sub_rays_traced);
@@ -858,7 +947,10 @@ mod tests {
         let off = TransportMatrix::build(
             &d,
             &ZernikeCoefficients::zero(6.0),
-            EyePosition { x_mm: 40.0, ..Default::default() },
+            EyePosition {
+                x_mm: 40.0,
+                ..Default::default()
+            },
             &Default::default(),
         )
         .unwrap()
@@ -875,7 +967,10 @@ mod tests {
         let d = tiny();
         let base = aberrated(6.0);
         let terms = vec![4, 5, 7, 12];
-        let opts = TransportOptions { derivative_terms: terms.clone(), ..Default::default() };
+        let opts = TransportOptions {
+            derivative_terms: terms.clone(),
+            ..Default::default()
+        };
         let t = TransportMatrix::build(&d, &base, EyePosition::default(), &opts).unwrap();
         let c = coupling4();
         let l = rand_vec(t.n_samples() * 4, 3);
@@ -888,13 +983,25 @@ mod tests {
             let plain = TransportOptions::default();
             let tp = TransportMatrix::build(&d, &plus, EyePosition::default(), &plain).unwrap();
             let tm = TransportMatrix::build(&d, &minus, EyePosition::default(), &plain).unwrap();
-            let (mut yp, mut ym, mut yd) =
-                (vec![0f32; t.n_pixels() * 3], vec![0f32; t.n_pixels() * 3], vec![0f32; t.n_pixels() * 3]);
+            let (mut yp, mut ym, mut yd) = (
+                vec![0f32; t.n_pixels() * 3],
+                vec![0f32; t.n_pixels() * 3],
+                vec![0f32; t.n_pixels() * 3],
+            );
             tp.forward_lms(&l, &c, &mut yp);
             tm.forward_lms(&l, &c, &mut ym);
             t.derivative_forward_lms(k, &l, &c, &mut yd);
-            let fd: Vec<f64> = yp.iter().zip(&ym).map(|(a, b)| (*a as f64 - *b as f64) / (2.0 * h)).collect();
-            let err: f64 = fd.iter().zip(&yd).map(|(a, b)| (a - *b as f64).powi(2)).sum::<f64>().sqrt();
+            let fd: Vec<f64> = yp
+                .iter()
+                .zip(&ym)
+                .map(|(a, b)| (*a as f64 - *b as f64) / (2.0 * h))
+                .collect();
+            let err: f64 = fd
+                .iter()
+                .zip(&yd)
+                .map(|(a, b)| (a - *b as f64).powi(2))
+                .sum::<f64>()
+                .sqrt();
             let norm: f64 = fd.iter().map(|a| a * a).sum::<f64>().sqrt();
             assert!(norm > 0.0);
             assert!(err / norm < 0.02, "term {j}: relative error {}", err / norm);

@@ -72,7 +72,10 @@ impl VisionProfile {
 
     /// Checks finiteness and physical ranges.
     pub fn validate(&self) -> Result<(), ProfileError> {
-        let bad = |field: &str, reason: String| ProfileError::Invalid { field: field.to_string(), reason };
+        let bad = |field: &str, reason: String| ProfileError::Invalid {
+            field: field.to_string(),
+            reason,
+        };
         if !(self.pupil_diameter_mm.is_finite() && (2.0..=9.0).contains(&self.pupil_diameter_mm)) {
             return Err(bad(
                 "pupil_diameter_mm",
@@ -81,7 +84,10 @@ impl VisionProfile {
         }
         if let Some(z) = self.zernike_pupil_diameter_mm {
             if !(z.is_finite() && (2.0..=10.0).contains(&z)) {
-                return Err(bad("zernike_pupil_diameter_mm", format!("must be within 2..=10 mm, got {z}")));
+                return Err(bad(
+                    "zernike_pupil_diameter_mm",
+                    format!("must be within 2..=10 mm, got {z}"),
+                ));
             }
             if z + 1e-9 < self.pupil_diameter_mm {
                 return Err(bad(
@@ -94,7 +100,10 @@ impl VisionProfile {
             }
         }
         if self.zernike_um.len() > 66 {
-            return Err(bad("zernike_um", format!("at most 66 terms (order 10), got {}", self.zernike_um.len())));
+            return Err(bad(
+                "zernike_um",
+                format!("at most 66 terms (order 10), got {}", self.zernike_um.len()),
+            ));
         }
         for (j, c) in self.zernike_um.iter().enumerate() {
             if !c.is_finite() || c.abs() > MAX_COEFFICIENT_UM {
@@ -115,7 +124,10 @@ impl VisionProfile {
     /// the prescription's defocus and astigmatism added, piston and tilt removed (tilt only shifts the
     /// whole retinal image).
     pub fn effective_wavefront(&self) -> Result<ZernikeCoefficients, ProfileError> {
-        let bad = |reason: String| ProfileError::Invalid { field: "zernike_um".into(), reason };
+        let bad = |reason: String| ProfileError::Invalid {
+            field: "zernike_um".into(),
+            reason,
+        };
         let measured = self.zernike_pupil_diameter_mm.unwrap_or(self.pupil_diameter_mm);
         let z = ZernikeCoefficients::new(measured, self.zernike_um.clone()).map_err(|e| bad(e.to_string()))?;
         let mut z = z.rescaled(self.pupil_diameter_mm).map_err(|e| bad(e.to_string()))?;
@@ -172,7 +184,11 @@ mod tests {
     #[test]
     fn prescription_adds_defocus_to_the_effective_wavefront() {
         let mut p = VisionProfile::perfect();
-        p.prescription = Some(Prescription { sphere_d: -2.0, cylinder_d: 0.0, axis_deg: 0.0 });
+        p.prescription = Some(Prescription {
+            sphere_d: -2.0,
+            cylinder_d: 0.0,
+            axis_deg: 0.0,
+        });
         let w = p.effective_wavefront().unwrap();
         // −2.00 D at 6 mm: C(2,0) = −M·r²/(4√3) = 2·9/(4√3) = 2.598 µm.
         assert!((w.get(4) - 2.598).abs() < 1e-3, "{}", w.get(4));

@@ -144,8 +144,7 @@ fn binomial(n: usize, k: usize) -> f64 {
 fn radial_coefficient(n: u32, m_abs: u32, s: u32) -> f64 {
     let half_sum = (n + m_abs) / 2;
     let half_diff = (n - m_abs) / 2;
-    let magnitude =
-        factorial(n - s) / (factorial(s) * factorial(half_sum - s) * factorial(half_diff - s));
+    let magnitude = factorial(n - s) / (factorial(s) * factorial(half_sum - s) * factorial(half_diff - s));
     if s % 2 == 0 {
         magnitude
     } else {
@@ -336,8 +335,7 @@ fn add_term_monomials(value: &mut [f64; N_MONOMIALS], n: u32, m: i32, c: f64) {
                     (true, 2) | (false, 3) => -1.0,
                     _ => continue,
                 };
-                value[monomial_index(2 * i + k_ang - l, 2 * (k - i) + l)] +=
-                    sign * even_coef * binomial(k_ang, l);
+                value[monomial_index(2 * i + k_ang - l, 2 * (k - i) + l)] += sign * even_coef * binomial(k_ang, l);
             }
         }
     }
@@ -354,9 +352,7 @@ pub enum ZernikeError {
         index: usize,
     },
     /// A coefficient is larger than any human eye's.
-    #[error(
-        "coefficients_um[{index}] = {value_um} µm exceeds the plausible magnitude of {max_um} µm"
-    )]
+    #[error("coefficients_um[{index}] = {value_um} µm exceeds the plausible magnitude of {max_um} µm")]
     CoefficientOutOfRange {
         /// OSA index j of the offending coefficient.
         index: usize,
@@ -537,9 +533,7 @@ impl ZernikeCoefficients {
     pub fn wavefront_um(&self, x_mm: f64, y_mm: f64) -> f64 {
         let r = self.pupil_radius_mm();
         let (x, y) = (x_mm / r, y_mm / r);
-        self.nonzero_terms()
-            .map(|(j, c)| c * zernike_value(j, x, y))
-            .sum()
+        self.nonzero_terms().map(|(j, c)| c * zernike_value(j, x, y)).sum()
     }
 
     /// Wavefront slope [∂W/∂x, ∂W/∂y] with respect to physical pupil coordinates, (1/r_p)·∂W/∂ρ, in
@@ -691,12 +685,7 @@ fn check_field(field: &'static str, value: f64, min: f64, max: f64) -> Result<()
     if !value.is_finite() {
         Err(ZernikeError::NonFinite { field })
     } else if value < min || value > max {
-        Err(ZernikeError::PrescriptionOutOfRange {
-            field,
-            value,
-            min,
-            max,
-        })
+        Err(ZernikeError::PrescriptionOutOfRange { field, value, min, max })
     } else {
         Ok(())
     }
@@ -743,12 +732,7 @@ impl Prescription {
     /// Checks that every field is finite, |sphere| ≤ 20 D, |cylinder| ≤ 10 D and the axis is in [0, 180].
     pub fn validate(&self) -> Result<(), ZernikeError> {
         check_field("sphere_d", self.sphere_d, -MAX_SPHERE_D, MAX_SPHERE_D)?;
-        check_field(
-            "cylinder_d",
-            self.cylinder_d,
-            -MAX_CYLINDER_D,
-            MAX_CYLINDER_D,
-        )?;
+        check_field("cylinder_d", self.cylinder_d, -MAX_CYLINDER_D, MAX_CYLINDER_D)?;
         check_field("axis_deg", self.axis_deg, 0.0, 180.0)
     }
 }
@@ -904,10 +888,7 @@ mod tests {
                 (5, 6f64.sqrt() * r2 * (2.0 * theta).cos()),
                 (7, 8f64.sqrt() * (3.0 * r2 * rho - 2.0 * rho) * theta.sin()),
                 (12, 5f64.sqrt() * (6.0 * r2 * r2 - 6.0 * r2 + 1.0)),
-                (
-                    24,
-                    7f64.sqrt() * (20.0 * r2.powi(3) - 30.0 * r2 * r2 + 12.0 * r2 - 1.0),
-                ),
+                (24, 7f64.sqrt() * (20.0 * r2.powi(3) - 30.0 * r2 * r2 + 12.0 * r2 - 1.0)),
             ];
             for (j, expected) in cases {
                 let got = zernike_value(j, x, y);
@@ -936,10 +917,7 @@ mod tests {
                 let fd = central_difference(|x, y| zernike_value(j, x, y), x, y);
                 for axis in 0..2 {
                     let err = (g[axis] - fd[axis]).abs();
-                    assert!(
-                        err < 1e-6 * (1.0 + g[axis].abs()),
-                        "j={j} axis {axis}: {g:?} vs {fd:?}"
-                    );
+                    assert!(err < 1e-6 * (1.0 + g[axis].abs()), "j={j} axis {axis}: {g:?} vs {fd:?}");
                 }
             }
         }
@@ -961,10 +939,7 @@ mod tests {
                 let fd = central_difference(|x, y| poly.value(x, y), x, y);
                 for axis in 0..2 {
                     let err = (g[axis] - fd[axis]).abs();
-                    assert!(
-                        err < 1e-6 * (1.0 + g[axis].abs()),
-                        "j={j} axis {axis}: {g:?} vs {fd:?}"
-                    );
+                    assert!(err < 1e-6 * (1.0 + g[axis].abs()), "j={j} axis {axis}: {g:?} vs {fd:?}");
                 }
             }
         }
@@ -978,15 +953,9 @@ mod tests {
             let poly = ZernikePolynomial::single_term(j);
             for _ in 0..50 {
                 let (x, y) = random_in_disk(&mut rng, 1.0);
-                assert!(
-                    (poly.value(x, y) - zernike_value(j, x, y)).abs() < 1e-11,
-                    "j={j}"
-                );
+                assert!((poly.value(x, y) - zernike_value(j, x, y)).abs() < 1e-11, "j={j}");
                 let (g, h) = (poly.gradient(x, y), zernike_gradient(j, x, y));
-                assert!(
-                    (g[0] - h[0]).abs() < 1e-10 && (g[1] - h[1]).abs() < 1e-10,
-                    "j={j}"
-                );
+                assert!((g[0] - h[0]).abs() < 1e-10 && (g[1] - h[1]).abs() < 1e-10, "j={j}");
             }
         }
     }
@@ -1000,11 +969,7 @@ mod tests {
             let poly = ZernikePolynomial::from_coefficients(&c);
             for _ in 0..50 {
                 let (x, y) = random_in_disk(&mut rng, 1.0);
-                let value: f64 = c
-                    .iter()
-                    .enumerate()
-                    .map(|(j, c)| c * zernike_value(j, x, y))
-                    .sum();
+                let value: f64 = c.iter().enumerate().map(|(j, c)| c * zernike_value(j, x, y)).sum();
                 let mut grad = [0.0; 2];
                 for (j, c) in c.iter().enumerate() {
                     let g = zernike_gradient(j, x, y);
@@ -1021,10 +986,7 @@ mod tests {
             ZernikePolynomial::from_coefficients(&[3.0]).gradient(0.3, 0.2),
             [0.0; 2]
         );
-        assert_eq!(
-            ZernikePolynomial::from_coefficients(&[]).value(0.3, 0.2),
-            0.0
-        );
+        assert_eq!(ZernikePolynomial::from_coefficients(&[]).value(0.3, 0.2), 0.0);
     }
 
     #[test]
@@ -1061,10 +1023,7 @@ mod tests {
                 for _ in 0..100 {
                     let (x, y) = random_in_disk(&mut rng, new_d / 2.0);
                     let (a, b) = (set.wavefront_um(x, y), small.wavefront_um(x, y));
-                    assert!(
-                        (a - b).abs() < 1e-10,
-                        "{terms} terms, d={new_d}: {a} vs {b}"
-                    );
+                    assert!((a - b).abs() < 1e-10, "{terms} terms, d={new_d}: {a} vs {b}");
                     let (ga, gb) = (set.gradient_mrad(x, y), small.gradient_mrad(x, y));
                     assert!((ga[0] - gb[0]).abs() < 1e-9 && (ga[1] - gb[1]).abs() < 1e-9);
                 }
@@ -1119,10 +1078,7 @@ mod tests {
                 to_mm: 6.0
             })
         );
-        assert!(matches!(
-            set.rescaled(0.0),
-            Err(ZernikeError::PupilOutOfRange { .. })
-        ));
+        assert!(matches!(set.rescaled(0.0), Err(ZernikeError::PupilOutOfRange { .. })));
         assert!(matches!(
             set.rescaled(f64::NAN),
             Err(ZernikeError::PupilOutOfRange { .. })
@@ -1166,20 +1122,13 @@ mod tests {
             let back = ZernikeCoefficients::from_prescription(&rx, pupil).prescription();
             // Minus-cylinder transposition of the original.
             let (sphere, cyl, axis) = if rx.cylinder_d > 0.0 {
-                (
-                    rx.sphere_d + rx.cylinder_d,
-                    -rx.cylinder_d,
-                    rx.axis_deg + 90.0,
-                )
+                (rx.sphere_d + rx.cylinder_d, -rx.cylinder_d, rx.axis_deg + 90.0)
             } else {
                 (rx.sphere_d, rx.cylinder_d, rx.axis_deg)
             };
             assert!((back.sphere_d - sphere).abs() < 1e-10, "{rx:?} -> {back:?}");
             assert!((back.cylinder_d - cyl).abs() < 1e-10, "{rx:?} -> {back:?}");
-            assert!(
-                axis_distance_deg(back.axis_deg, axis) < 1e-8,
-                "{rx:?} -> {back:?}"
-            );
+            assert!(axis_distance_deg(back.axis_deg, axis) < 1e-8, "{rx:?} -> {back:?}");
             assert!((0.0..180.0).contains(&back.axis_deg));
             assert!(back.cylinder_d <= 0.0);
         }
@@ -1233,11 +1182,7 @@ mod tests {
             for theta in [0.0, 0.7, 2.0, 4.0] {
                 let (x, y) = (3.0 * f64::cos(theta), 3.0 * f64::sin(theta));
                 let [gx, gy] = set.gradient_mrad(x, y);
-                assert!(
-                    (gx.hypot(gy) - 3.0).abs() < 1e-12,
-                    "|∇W| = {}",
-                    gx.hypot(gy)
-                );
+                assert!((gx.hypot(gy) - 3.0).abs() < 1e-12, "|∇W| = {}", gx.hypot(gy));
                 // Myopia (S < 0, C(2,0) > 0) makes the slope point outwards.
                 assert!((gx * x + gy * y).signum() == -sphere_d.signum());
                 // The polynomial route agrees once divided by r_p.
@@ -1254,9 +1199,7 @@ mod tests {
         let set = ZernikeCoefficients::new(6.0, c.clone()).unwrap();
         let hoa: f64 = c[6..].iter().map(|c| c * c).sum::<f64>().sqrt();
         assert!((set.rms_um(3..=MAX_RADIAL_ORDER) - hoa).abs() < 1e-12);
-        assert!(
-            (set.rms_um(2..=2) - (c[3].powi(2) + c[4].powi(2) + c[5].powi(2)).sqrt()).abs() < 1e-12
-        );
+        assert!((set.rms_um(2..=2) - (c[3].powi(2) + c[4].powi(2) + c[5].powi(2)).sqrt()).abs() < 1e-12);
         let no_tilt = set.with_order_range_zeroed(0..=1);
         assert_eq!(&no_tilt.coefficients_um[..3], &[0.0; 3]);
         assert_eq!(&no_tilt.coefficients_um[3..], &c[3..]);
@@ -1290,16 +1233,10 @@ mod tests {
         assert!(matches!(err, ZernikeError::PupilOutOfRange { value_mm, .. } if value_mm == 60.0));
         assert!(err.to_string().contains("pupil_diameter_mm"));
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-            assert!(
-                ZernikeCoefficients::new(bad, vec![]).is_err(),
-                "pupil {bad}"
-            );
+            assert!(ZernikeCoefficients::new(bad, vec![]).is_err(), "pupil {bad}");
         }
         let err = ZernikeCoefficients::new(6.0, vec![0.0, 51.0]).unwrap_err();
-        assert!(matches!(
-            err,
-            ZernikeError::CoefficientOutOfRange { index: 1, .. }
-        ));
+        assert!(matches!(err, ZernikeError::CoefficientOutOfRange { index: 1, .. }));
         assert!(err.to_string().contains("coefficients_um[1]"));
     }
 
@@ -1319,31 +1256,11 @@ mod tests {
         .validate()
         .unwrap_err();
         assert_eq!(err, ZernikeError::NonFinite { field: "sphere_d" });
-        let err = Prescription {
-            cylinder_d: 12.0,
-            ..ok
-        }
-        .validate()
-        .unwrap_err();
+        let err = Prescription { cylinder_d: 12.0, ..ok }.validate().unwrap_err();
         assert!(err.to_string().starts_with("cylinder_d = 12"));
-        assert!(Prescription {
-            axis_deg: 181.0,
-            ..ok
-        }
-        .validate()
-        .is_err());
-        assert!(Prescription {
-            axis_deg: -1.0,
-            ..ok
-        }
-        .validate()
-        .is_err());
-        assert!(Prescription {
-            sphere_d: 21.0,
-            ..ok
-        }
-        .validate()
-        .is_err());
+        assert!(Prescription { axis_deg: 181.0, ..ok }.validate().is_err());
+        assert!(Prescription { axis_deg: -1.0, ..ok }.validate().is_err());
+        assert!(Prescription { sphere_d: 21.0, ..ok }.validate().is_err());
     }
 
     #[test]
@@ -1351,14 +1268,10 @@ mod tests {
         // Exact: serde round trip of valid values, rejection of invalid ones with the field named.
         let set = ZernikeCoefficients::new(6.0, vec![0.0, 0.1, -0.2, 0.3]).unwrap();
         let json = serde_json::to_string(&set).unwrap();
-        assert_eq!(
-            serde_json::from_str::<ZernikeCoefficients>(&json).unwrap(),
-            set
-        );
-        let err = serde_json::from_str::<ZernikeCoefficients>(
-            r#"{"pupil_diameter_mm": 60.0, "coefficients_um": [0.0]}"#,
-        )
-        .unwrap_err();
+        assert_eq!(serde_json::from_str::<ZernikeCoefficients>(&json).unwrap(), set);
+        let err =
+            serde_json::from_str::<ZernikeCoefficients>(r#"{"pupil_diameter_mm": 60.0, "coefficients_um": [0.0]}"#)
+                .unwrap_err();
         assert!(err.to_string().contains("pupil_diameter_mm"), "{err}");
         let rx = Prescription {
             sphere_d: -1.25,
@@ -1367,10 +1280,8 @@ mod tests {
         };
         let json = serde_json::to_string(&rx).unwrap();
         assert_eq!(serde_json::from_str::<Prescription>(&json).unwrap(), rx);
-        let err = serde_json::from_str::<Prescription>(
-            r#"{"sphere_d": -1.0, "cylinder_d": -0.5, "axis_deg": 200.0}"#,
-        )
-        .unwrap_err();
+        let err = serde_json::from_str::<Prescription>(r#"{"sphere_d": -1.0, "cylinder_d": -0.5, "axis_deg": 200.0}"#)
+            .unwrap_err();
         assert!(err.to_string().contains("axis_deg"), "{err}");
     }
 }
