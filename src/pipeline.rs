@@ -28,9 +28,11 @@ pub enum Method {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Ablation {
-    /// Every observer is given the target's spectral coupling: only the optics differ.
+    /// Every observer is given the target's spectral coupling, and difference maximisation drops its λ_c
+    /// term: only the optics differ.
     Optical,
-    /// All views of a hole are forced equal: a plain multiband 2D display.
+    /// All views of a hole are forced equal (a plain multiband 2D display), and difference maximisation drops
+    /// its λ_W term.
     Spectral,
 }
 
@@ -402,7 +404,10 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
             let data = MultiplexObjective::new(terms, n, energy, 1e-4);
             let dm;
             let objective: &dyn Objective = if diffmax {
-                dm = DiffMaxObjective::new(data, &target, o.lambda_w, o.lambda_c);
+                // Ablations take the other key's derivative term away: optical only keeps λ_W, spectral only λ_c.
+                let lambda_w = if o.ablation == Some(Ablation::Spectral) { 0.0 } else { o.lambda_w };
+                let lambda_c = if o.ablation == Some(Ablation::Optical) { 0.0 } else { o.lambda_c };
+                dm = DiffMaxObjective::new(data, &target, lambda_w, lambda_c);
                 &dm
             } else {
                 &data
