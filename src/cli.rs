@@ -173,6 +173,9 @@ pub struct EncodeArgs {
     /// Adaptive decoy rounds: add sampled people who can still read as decoys and solve again.
     #[arg(long)]
     pub adaptive_rounds: Option<u32>,
+    /// Add camera decoys: an ideal lens behind a one-band filter, shown noise.
+    #[arg(long)]
+    pub camera_decoys: bool,
     /// Output bundle directory (must not exist).
     #[arg(long)]
     pub out: PathBuf,
@@ -530,6 +533,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         evaluation_population: 0,
         head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
         adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
+        camera_decoys: a.camera_decoys || d.camera_decoys,
         ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {

@@ -623,12 +623,13 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     )?;
     writeln!(
         md,
-        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, {} adaptive rounds of {} candidates (decoys added: {}) |",
+        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, {} adaptive rounds of {} candidates (decoys added: {}), camera decoys: {} |",
         options.population_decoys,
         options.decoy_weight,
         options.adaptive_rounds,
         options.adaptive_candidates,
-        enc.solver["adaptive_decoys_added"]
+        enc.solver["adaptive_decoys_added"],
+        options.camera_decoys
     )?;
     writeln!(
         md,
@@ -704,6 +705,7 @@ pub fn secure_encode_options() -> EncodeOptions {
         adaptive_rounds: 2,
         adaptive_candidates: 32,
         adaptive_per_round: 6,
+        camera_decoys: true,
         ..Default::default()
     }
 }

@@ -88,6 +88,9 @@ pub struct EncodeOptions {
     pub adaptive_candidates: u32,
     /// Decoys added per adaptive round at most.
     pub adaptive_per_round: u32,
+    /// Camera decoys: an ideal 6 mm lens focused at −0.5 D and +0.5 D behind a filter passing one projector band
+    /// (the evaluation's strongest attacker), each shown a noise mask.
+    pub camera_decoys: bool,
 }
 
 impl Default for EncodeOptions {
@@ -109,6 +112,7 @@ impl Default for EncodeOptions {
             adaptive_rounds: 0,
             adaptive_candidates: 24,
             adaptive_per_round: 4,
+            camera_decoys: false,
         }
     }
 }
@@ -314,6 +318,7 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
         progress(0.05 + 0.1 * (k + 1) as f64 / others_profiles.len() as f64);
     }
     let g = target.transport.grid;
+    let n_bands_all = d.n_bands();
     let target_obj = target.objective(&spec.document, OBJECTIVE_LEVEL);
     let energy: f64 = target_obj.iter().map(|v| (*v as f64).powi(2)).sum();
     // Stacked target observers at four eye positions on a ring of radius head_radius_mm, each asked for the
@@ -328,6 +333,19 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
                 dz_mm: 0.0,
             };
             moved.push(Observer::new(d, &spec.target, eye, &base).map_err(internal)?);
+        }
+    }
+    if o.camera_decoys && !matches!(o.method, Method::Diffmax) {
+        for focus in [-0.5, 0.5] {
+            let rx = crate::optics::zernike::Prescription { sphere_d: focus, cylinder_d: 0.0, axis_deg: 0.0 };
+            let lens = crate::optics::zernike::ZernikeCoefficients::from_prescription(&rx, 6.0);
+            let tr = crate::transport::TransportCache::global()
+                .get_or_build(d, &lens, EyePosition::default(), &base)
+                .map_err(|e| PipelineError::Invalid(e.to_string()))?;
+            for band in 0..n_bands_all {
+                let c = (0..n_bands_all).map(|m| if m == band { [1.0; 3] } else { [0.0; 3] }).collect();
+                others.push(Observer::with_coupling(tr.clone(), c, d.l_max));
+            }
         }
     }
     let decoy_for = |k: usize| match (o.decoy, &spec.decoy) {
