@@ -70,15 +70,4 @@ average at the start: $load.
 Bundle download (\`small\` preset, $size bytes per zip, 4 connections, display token): $(rps "$dl") downloads/s,
 $(echo "$dl" | awk '/Transfer\/sec/ {print $2}')/s.
 "
-python3 - "$body" <<'PY'
-import sys, re
-body = sys.argv[1] + "\n"
-start, end = "<!-- bench:http -->", "<!-- /bench:http -->"
-try:
-    old = open("BENCHMARKS.md").read()
-except FileNotFoundError:
-    old = ""
-block = f"{start}\n{body}{end}"
-new = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda m: block, old, flags=re.S) if start in old else old + ("\n" if old and not old.endswith("\n") else "") + "\n## HTTP service under load\n\n" + block + "\n"
-open("BENCHMARKS.md", "w").write(new)
-PY
+echo "$body" | python3 benches/write_section.py http "HTTP service under load"

@@ -25,16 +25,5 @@ if r.get("ratio_scipy_over_eyekey"):
     print(f"\nRatio SciPy / eyekey: **{r['ratio_scipy_over_eyekey']:.1f}×**")
 PY
 )
-python3 - "$body" <<'PY'
-import sys, re
-body = sys.argv[1] + "\n"
-start, end = "<!-- bench:scipy -->", "<!-- /bench:scipy -->"
-try:
-    old = open("BENCHMARKS.md").read()
-except FileNotFoundError:
-    old = ""
-block = f"{start}\n{body}{end}"
-new = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda m: block, old, flags=re.S) if start in old else old + ("\n" if old and not old.endswith("\n") else "") + block + "\n"
-open("BENCHMARKS.md", "w").write(new)
-PY
+echo "$body" | python3 benches/write_section.py scipy
 rm -rf "$dir"
