@@ -662,7 +662,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
     if all || a.section == "solver" {
         let mut body = format!(
             "Measured {stamp} by `{cmd}` (release build). Time and iterations to reach an objective within 1e-3 \
-             (relative) of the optimum found by a 3000-iteration, 1e-9-tolerance run from the same start.\n\n\
+             (relative) of the optimum found by a 1500-iteration, 1e-9-tolerance run from the same start.\n\n\
              | problem | observers | unknowns | optimum f* | iterations to 1e-3 | time to 1e-3 | ms / iteration | peak memory |\n\
              | --- | --- | --- | --- | --- | --- | --- | --- |\n"
         );

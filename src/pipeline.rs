@@ -337,13 +337,19 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
     }
     if o.camera_decoys && !matches!(o.method, Method::Diffmax) {
         for focus in [-0.5, 0.5] {
-            let rx = crate::optics::zernike::Prescription { sphere_d: focus, cylinder_d: 0.0, axis_deg: 0.0 };
+            let rx = crate::optics::zernike::Prescription {
+                sphere_d: focus,
+                cylinder_d: 0.0,
+                axis_deg: 0.0,
+            };
             let lens = crate::optics::zernike::ZernikeCoefficients::from_prescription(&rx, 6.0);
             let tr = crate::transport::TransportCache::global()
                 .get_or_build(d, &lens, EyePosition::default(), &base)
                 .map_err(|e| PipelineError::Invalid(e.to_string()))?;
             for band in 0..n_bands_all {
-                let c = (0..n_bands_all).map(|m| if m == band { [1.0; 3] } else { [0.0; 3] }).collect();
+                let c = (0..n_bands_all)
+                    .map(|m| if m == band { [1.0; 3] } else { [0.0; 3] })
+                    .collect();
                 others.push(Observer::with_coupling(tr.clone(), c, d.l_max));
             }
         }
@@ -423,8 +429,16 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
             let dm;
             let objective: &dyn Objective = if diffmax {
                 // Ablations take the other key's derivative term away: optical only keeps λ_W, spectral only λ_c.
-                let lambda_w = if o.ablation == Some(Ablation::Spectral) { 0.0 } else { o.lambda_w };
-                let lambda_c = if o.ablation == Some(Ablation::Optical) { 0.0 } else { o.lambda_c };
+                let lambda_w = if o.ablation == Some(Ablation::Spectral) {
+                    0.0
+                } else {
+                    o.lambda_w
+                };
+                let lambda_c = if o.ablation == Some(Ablation::Optical) {
+                    0.0
+                } else {
+                    o.lambda_c
+                };
                 dm = DiffMaxObjective::new(data, &target, lambda_w, lambda_c);
                 &dm
             } else {
