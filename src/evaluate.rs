@@ -800,7 +800,10 @@ pub fn contact_sheet(report: &Report, pictures: &[(String, RgbImage)]) -> RgbIma
         let x0 = 8 + k as u32 * (tile + 8);
         let scaled = image::imageops::resize(*pic, tile, tile, image::imageops::FilterType::Nearest);
         image::imageops::replace(&mut sheet, &scaled, x0 as i64, 8);
-        let short = name.trim_end_matches(".png").replace('_', " ").to_uppercase();
+        let short = match *name {
+            "population_worst.png" => "WORST".to_string(),
+            other => other.trim_end_matches(".png").replace('_', " ").to_uppercase(),
+        };
         let text = match score_of(name) {
             Some(s) => format!("{} {:.2}", short.split(' ').next().unwrap_or(""), s),
             None => short.split(' ').next().unwrap_or("").to_string(),
@@ -816,15 +819,14 @@ pub fn contact_sheet(report: &Report, pictures: &[(String, RgbImage)]) -> RgbIma
         .map(|p| p.people.iter().map(|s| s.legibility).collect())
         .unwrap_or_default();
     legs.sort_by(|a, b| a.total_cmp(b));
-    let bar_w = (tile / legs.len().max(1) as u32).max(1);
+    // One column per pixel: the sorted legibilities resampled to the plot's width (a quantile plot), so a
+    // population of any size fills it.
     let y_of = |v: f64| 8 + tile - ((v.clamp(0.0, 1.0) * tile as f64) as u32).min(tile);
-    for (i, v) in legs.iter().enumerate() {
-        for x in 0..bar_w.saturating_sub(1).max(1) {
-            for y in y_of(*v)..8 + tile {
-                let px = x0 + i as u32 * bar_w + x;
-                if px < x0 + tile {
-                    sheet.put_pixel(px, y, Rgb([90, 90, 200]));
-                }
+    if !legs.is_empty() {
+        for x in 0..tile {
+            let v = legs[(x as usize * legs.len() / tile as usize).min(legs.len() - 1)];
+            for y in y_of(v)..8 + tile {
+                sheet.put_pixel(x0 + x, y, Rgb([90, 90, 200]));
             }
         }
     }

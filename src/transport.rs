@@ -174,8 +174,11 @@ impl CsrMatrix {
     }
 }
 
-/// Rows per rayon task in the sparse kernels: large enough to amortise scheduling, small enough to balance.
-const ROWS_PER_TASK: usize = 2048;
+/// Rows per rayon task in the sparse kernels: about eight tasks per thread (enough to balance rows of
+/// uneven length), but never fewer than 64 rows (scheduling must stay cheap).
+fn rows_per_task(n_rows: usize) -> usize {
+    (n_rows / (8 * rayon::current_num_threads().max(1))).max(64)
+}
 
 /// out[r·3 + a] = Σ_n c[n][a] Σ_e v_e · x[col_e · N + n] (forward, Eq. 13), or with `transpose_mix`
 /// out[r·N + n] = Σ_a c[n][a] Σ_e v_e · y[col_e · 3 + a] (adjoint): the sparse product fused with the spectral
@@ -219,10 +222,11 @@ fn spmv_fixed<const NI: usize>(
     } else {
         mix.len()
     };
-    out.par_chunks_mut(ROWS_PER_TASK * n_out)
+    let rows_per_chunk = rows_per_task(out.len() / n_out.max(1));
+    out.par_chunks_mut(rows_per_chunk * n_out)
         .enumerate()
         .for_each(|(chunk, out_rows)| {
-            let first = chunk * ROWS_PER_TASK;
+            let first = chunk * rows_per_chunk;
             for (k, o) in out_rows.chunks_exact_mut(n_out).enumerate() {
                 let r = first + k;
                 let mut acc = [0f32; NI];
