@@ -1,4 +1,4 @@
-//! The frame bundle: what an encode hands to the display (issue 3, item 6).
+//! The frame bundle: what an encode hands to the display.
 //!
 //! A bundle is a directory, or a `.zip` of one, holding
 //! - one 16-bit greyscale PNG per projector, `frame_<n>.png`, of (X·U)×(Y·V) pixels with
