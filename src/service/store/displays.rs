@@ -71,19 +71,7 @@ pub async fn by_token_hash(pool: &SqlitePool, hash: &[u8]) -> Result<Option<Disp
 
 /// Live displays, newest first.
 pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DisplayRow>, sqlx::Error> {
-    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
-    sqlx::query_as::<_, DisplayRow>(&format!(
-        "SELECT {COLUMNS} FROM displays
-         WHERE deleted_at IS NULL AND (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
-         ORDER BY created_at DESC, id DESC LIMIT ?"
-    ))
-    .bind(at)
-    .bind(at)
-    .bind(id)
-    .bind(id)
-    .bind(limit as i64)
-    .fetch_all(pool)
-    .await
+    super::list_page(pool, "displays", COLUMNS, true, limit, cursor).await
 }
 
 /// Replaces the token hash; the old token stops working at once.

@@ -75,17 +75,5 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DocumentRow>, sql
 
 /// Documents, newest first.
 pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DocumentRow>, sqlx::Error> {
-    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
-    sqlx::query_as::<_, DocumentRow>(&format!(
-        "SELECT {COLUMNS} FROM documents
-         WHERE (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
-         ORDER BY created_at DESC, id DESC LIMIT ?"
-    ))
-    .bind(at)
-    .bind(at)
-    .bind(id)
-    .bind(id)
-    .bind(limit as i64)
-    .fetch_all(pool)
-    .await
+    super::list_page(pool, "documents", COLUMNS, false, limit, cursor).await
 }

@@ -103,6 +103,36 @@ impl Cursor {
     }
 }
 
+/// One page of `table`, newest first, by keyset pagination on (created_at, id): stable under concurrent
+/// inserts, unlike OFFSET. `live_only` skips soft-deleted rows (tables with a `deleted_at` column).
+pub async fn list_page<T>(
+    pool: &sqlx::SqlitePool,
+    table: &str,
+    columns: &str,
+    live_only: bool,
+    limit: u32,
+    cursor: Option<&Cursor>,
+) -> Result<Vec<T>, sqlx::Error>
+where
+    T: for<'r> sqlx::FromRow<'r, sqlx::sqlite::SqliteRow> + Send + Unpin,
+{
+    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
+    let live = if live_only { "deleted_at IS NULL AND " } else { "" };
+    // `table` and `columns` are compile-time constants of the store modules, never client input.
+    sqlx::query_as::<_, T>(&format!(
+        "SELECT {columns} FROM {table}
+         WHERE {live}(created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
+         ORDER BY created_at DESC, id DESC LIMIT ?"
+    ))
+    .bind(at)
+    .bind(at)
+    .bind(id)
+    .bind(id)
+    .bind(limit as i64)
+    .fetch_all(pool)
+    .await
+}
+
 /// Page size bounds for listings.
 pub const DEFAULT_PAGE: u32 = 50;
 /// Largest page a client may ask for.

@@ -150,20 +150,7 @@ pub async fn get_version(pool: &SqlitePool, id: &str, version: i64) -> Result<Op
 
 /// Live profiles, newest first.
 pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<ProfileRow>, sqlx::Error> {
-    let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
-    // Keyset pagination on (created_at, id): stable under concurrent inserts, unlike OFFSET.
-    sqlx::query_as::<_, ProfileRow>(&format!(
-        "SELECT {COLUMNS} FROM profiles
-         WHERE deleted_at IS NULL AND (created_at < ? OR (created_at = ? AND id < ?) OR ? = '')
-         ORDER BY created_at DESC, id DESC LIMIT ?"
-    ))
-    .bind(at)
-    .bind(at)
-    .bind(id)
-    .bind(id)
-    .bind(limit as i64)
-    .fetch_all(pool)
-    .await
+    super::list_page(pool, "profiles", COLUMNS, true, limit, cursor).await
 }
 
 /// Deletes a profile: its sealed versions are removed (the keys are gone), the metadata row stays as a
