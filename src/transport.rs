@@ -231,13 +231,28 @@ fn spmv_fixed<const NI: usize>(
                 let r = first + k;
                 let mut acc = [0f32; NI];
                 let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
-                for e in a..b {
-                    let v = values[e];
-                    let base = indices[e] as usize * n_in;
-                    let xs = &x[base..base + n_in];
-                    for (slot, xv) in acc.iter_mut().zip(xs) {
-                        *slot += v * xv;
+                // Two independent accumulators over alternating entries hide the FMA latency.
+                let mut acc2 = [0f32; NI];
+                let (idx, val) = (&indices[a..b], &values[a..b]);
+                let pairs = idx.len() / 2;
+                for p in 0..pairs {
+                    let (i0, i1) = (idx[2 * p] as usize * n_in, idx[2 * p + 1] as usize * n_in);
+                    let (v0, v1) = (val[2 * p], val[2 * p + 1]);
+                    let (x0, x1) = (&x[i0..i0 + n_in], &x[i1..i1 + n_in]);
+                    for ((s0, s1), (a0, a1)) in acc.iter_mut().zip(acc2.iter_mut()).zip(x0.iter().zip(x1)) {
+                        *s0 += v0 * a0;
+                        *s1 += v1 * a1;
                     }
+                }
+                if idx.len() % 2 == 1 {
+                    let i0 = idx[idx.len() - 1] as usize * n_in;
+                    let v0 = val[val.len() - 1];
+                    for (s0, a0) in acc.iter_mut().zip(&x[i0..i0 + n_in]) {
+                        *s0 += v0 * a0;
+                    }
+                }
+                for (s0, s1) in acc.iter_mut().zip(acc2) {
+                    *s0 += s1;
                 }
                 if transpose_mix {
                     // Adjoint: out_n = Σ_a c[n][a] acc_a.
