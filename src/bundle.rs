@@ -524,22 +524,7 @@ pub fn read_bundle(path: &Path) -> Result<(Manifest, Vec<f32>), BundleError> {
     // Every listed file, verified before anything is decoded.
     let mut contents = Vec::with_capacity(manifest.files.len());
     for entry in &manifest.files {
-        let bytes = source.read(&entry.name, entry.bytes)?;
-        if bytes.len() as u64 != entry.bytes {
-            return Err(BundleError::Size {
-                name: entry.name.clone(),
-                expected: entry.bytes,
-                actual: bytes.len() as u64,
-            });
-        }
-        let actual = sha256_hex(&bytes);
-        if !actual.eq_ignore_ascii_case(&entry.sha256) {
-            return Err(BundleError::Checksum {
-                name: entry.name.clone(),
-                expected: entry.sha256.clone(),
-                actual,
-            });
-        }
+        let bytes = source.read_verified(entry)?;
         contents.push(bytes);
     }
 
@@ -718,6 +703,27 @@ enum Source {
 }
 
 impl Source {
+    /// Reads a listed file and checks its size and SHA-256 against the manifest entry.
+    fn read_verified(&mut self, entry: &FileEntry) -> Result<Vec<u8>, BundleError> {
+        let bytes = self.read(&entry.name, entry.bytes)?;
+        if bytes.len() as u64 != entry.bytes {
+            return Err(BundleError::Size {
+                name: entry.name.clone(),
+                expected: entry.bytes,
+                actual: bytes.len() as u64,
+            });
+        }
+        let actual = sha256_hex(&bytes);
+        if !actual.eq_ignore_ascii_case(&entry.sha256) {
+            return Err(BundleError::Checksum {
+                name: entry.name.clone(),
+                expected: entry.sha256.clone(),
+                actual,
+            });
+        }
+        Ok(bytes)
+    }
+
     /// Reads the plain-named file `name`, at most `limit + 1` bytes (one past, so that an oversized file
     /// shows as a size mismatch instead of being inflated in full).
     fn read(&mut self, name: &str, limit: u64) -> Result<Vec<u8>, BundleError> {
@@ -789,22 +795,7 @@ pub fn zip_bundle<W: Write + Seek>(dir: &Path, out: W) -> Result<(), BundleError
         reason: format!("{MANIFEST_FILE}: {e}"),
     })?;
     for entry in &manifest.files {
-        let bytes = source.read(&entry.name, entry.bytes)?;
-        if bytes.len() as u64 != entry.bytes {
-            return Err(BundleError::Size {
-                name: entry.name.clone(),
-                expected: entry.bytes,
-                actual: bytes.len() as u64,
-            });
-        }
-        let actual = sha256_hex(&bytes);
-        if !actual.eq_ignore_ascii_case(&entry.sha256) {
-            return Err(BundleError::Checksum {
-                name: entry.name.clone(),
-                expected: entry.sha256.clone(),
-                actual,
-            });
-        }
+        let bytes = source.read_verified(entry)?;
         let method = if entry.name.ends_with(".png") {
             zip::CompressionMethod::Stored
         } else {
