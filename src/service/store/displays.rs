@@ -102,21 +102,14 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
         .rows_affected()
         == 1;
     if done {
-        sqlx::query(
-            "UPDATE jobs SET state = 'cancelled', last_error = 'the display was deleted', finished_at = ?,
-                 updated_at = ?
-             WHERE display_id = ? AND state = 'queued'",
+        super::jobs::stop_jobs_of(
+            &mut tx,
+            super::jobs::JobOwner::Display,
+            id,
+            "the display was deleted",
+            now,
         )
-        .bind(now)
-        .bind(now)
-        .bind(id)
-        .execute(&mut *tx)
         .await?;
-        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE display_id = ? AND state = 'running'")
-            .bind(now)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
     }
     tx.commit().await?;
     Ok(done)

@@ -60,6 +60,49 @@ impl JobState {
     }
 }
 
+/// Which reference a deleted resource is held by in the jobs table.
+#[derive(Clone, Copy, Debug)]
+pub enum JobOwner {
+    /// `jobs.display_id`.
+    Display,
+    /// `jobs.profile_id` (the target profile).
+    Profile,
+}
+
+/// Inside the deleting transaction: cancels the queued jobs that reference a deleted display or profile
+/// (with `reason` as their last error) and asks the running ones to stop.
+pub async fn stop_jobs_of(
+    tx: &mut sqlx::SqliteConnection,
+    owner: JobOwner,
+    id: &str,
+    reason: &str,
+    now: i64,
+) -> Result<(), sqlx::Error> {
+    // The column name comes from this enum, never from input.
+    let column = match owner {
+        JobOwner::Display => "display_id",
+        JobOwner::Profile => "profile_id",
+    };
+    sqlx::query(&format!(
+        "UPDATE jobs SET state = 'cancelled', last_error = ?, finished_at = ?, updated_at = ?
+         WHERE {column} = ? AND state = 'queued'"
+    ))
+    .bind(reason)
+    .bind(now)
+    .bind(now)
+    .bind(id)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query(&format!(
+        "UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE {column} = ? AND state = 'running'"
+    ))
+    .bind(now)
+    .bind(id)
+    .execute(&mut *tx)
+    .await?;
+    Ok(())
+}
+
 /// A job row, as stored.
 #[derive(Clone, Debug, sqlx::FromRow)]
 pub struct JobRow {

@@ -173,21 +173,14 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
             .bind(id)
             .execute(&mut *tx)
             .await?;
-        sqlx::query(
-            "UPDATE jobs SET state = 'cancelled', last_error = 'the target profile was deleted',
-                 finished_at = ?, updated_at = ?
-             WHERE profile_id = ? AND state = 'queued'",
+        super::jobs::stop_jobs_of(
+            &mut tx,
+            super::jobs::JobOwner::Profile,
+            id,
+            "the target profile was deleted",
+            now,
         )
-        .bind(now)
-        .bind(now)
-        .bind(id)
-        .execute(&mut *tx)
         .await?;
-        sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE profile_id = ? AND state = 'running'")
-            .bind(now)
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
     }
     tx.commit().await?;
     Ok(done)
