@@ -83,7 +83,7 @@ impl Application {
         store::check_master_key(&writer, &master_key).await?;
         tracing::info!(database = %config.database_path().display(), "database ready");
 
-        crate::transport::TransportCache::global().set_capacity_bytes(config.transport_cache_bytes);
+        eyekey_core::physics::transport::TransportCache::global().set_capacity_bytes(config.transport_cache_bytes);
 
         let listener = TcpListener::bind(config.bind)
             .await

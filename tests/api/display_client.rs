@@ -50,7 +50,7 @@ fn assert_current_is_a_verified_bundle(out: &Path) {
     }
     assert!(current.join("barrier_mask.png").is_file());
     assert!(current.join("manifest.json").is_file());
-    let (manifest, l) = eyekey::bundle::read_bundle(&current).expect("current/ is a valid bundle");
+    let (manifest, l) = eyekey_core::bundle::read_bundle(&current).expect("current/ is a valid bundle");
     assert_eq!(manifest.display, tiny_display());
     assert_eq!(l.len(), tiny_display().n_samples_per_band() * n_bands);
     let leftovers: Vec<_> = std::fs::read_dir(out)
@@ -101,7 +101,7 @@ async fn display_client_once_downloads_verifies_and_writes_current_frames() {
     let second = finished_job(&app, &f).await;
     assert!(matches!(sync_once(&cfg).await.unwrap(), SyncOutcome::Installed { job_id, .. } if job_id == second));
     assert_current_is_a_verified_bundle(out.path());
-    assert!(eyekey::bundle::read_bundle(&out.path().join("previous")).is_ok());
+    assert!(eyekey_core::bundle::read_bundle(&out.path().join("previous")).is_ok());
     let state = read_state(out.path());
     assert_eq!(state.current.map(|c| c.job_id), Some(second));
     assert_eq!(state.previous.map(|c| c.job_id), Some(first));
@@ -236,7 +236,7 @@ async fn display_client_survives_the_server_going_away() {
         "the client keeps running while the server is away"
     );
     assert_eq!(read_state(out.path()).current.map(|c| c.job_id), Some(first));
-    assert!(eyekey::bundle::read_bundle(&out.path().join("current")).is_ok());
+    assert!(eyekey_core::bundle::read_bundle(&out.path().join("current")).is_ok());
 
     // It comes back on the same port with the same data; the client resumes and installs the next job.
     let app = spawn_app_in(data.path(), bind).await;

@@ -13,7 +13,9 @@ use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, OPERATO
 async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     let app = spawn_app_with(|c| c.workers = 1).await;
     let f = app.fixtures().await;
-    let observer = app.enrol(&eyekey::optics::profile::VisionProfile::perfect()).await;
+    let observer = app
+        .enrol(&eyekey_core::physics::profile::VisionProfile::perfect())
+        .await;
     let mut body = job_body(&f);
     body["observer_profile_ids"] = json!([observer]);
     let job = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
@@ -111,7 +113,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     // The crate's own bundle reader accepts the downloaded zip (it verifies every size and checksum).
     let zip_path = app.data_dir.join("downloaded.zip");
     std::fs::write(&zip_path, &zip_bytes).unwrap();
-    let (manifest, light_field) = eyekey::bundle::read_bundle(&zip_path).unwrap();
+    let (manifest, light_field) = eyekey_core::bundle::read_bundle(&zip_path).unwrap();
     assert_eq!(manifest.display, crate::helpers::tiny_display());
 
     // The operator reads the evaluation and the simulated views.
@@ -128,16 +130,17 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     // The target's view simulated from the downloaded bundle scores as the job's own evaluation says.
     // Same observer as the evaluation (its transport seed: the job's seed + 20000, xor 0xE7A1); the only
     // difference is the frames' 16-bit quantisation.
-    let options: eyekey::pipeline::EncodeOptions = serde_json::from_value(last["options"].clone()).unwrap();
-    let transport = eyekey::transport::TransportOptions {
+    let options: eyekey_core::encoding::pipeline::EncodeOptions =
+        serde_json::from_value(last["options"].clone()).unwrap();
+    let transport = eyekey_core::physics::transport::TransportOptions {
         sub_rays: options.sub_rays,
         seed: options.seed.wrapping_add(20_000) ^ 0xE7A1,
         ..Default::default()
     };
-    let observer = eyekey::observer::Observer::new(
+    let observer = eyekey_core::physics::observer::Observer::new(
         &manifest.display,
         &crate::helpers::myope(),
-        eyekey::transport::EyePosition::default(),
+        eyekey_core::physics::transport::EyePosition::default(),
         &transport,
     )
     .unwrap();
@@ -145,11 +148,11 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     let document = image::load_from_memory(&crate::helpers::document_png(24, 24))
         .unwrap()
         .to_rgb8();
-    let reference = eyekey::evaluate::Reference::new(
+    let reference = eyekey_core::evaluation::Reference::new(
         &document,
         grid.width,
         grid.height,
-        eyekey::pipeline::OBJECTIVE_LEVEL,
+        eyekey_core::encoding::pipeline::OBJECTIVE_LEVEL,
         report["threshold"].as_f64().unwrap(),
     );
     let (score, _) = reference.score_observer("target", &observer, &light_field);

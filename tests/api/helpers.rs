@@ -4,11 +4,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use eyekey::display::DisplayGeometry;
-use eyekey::optics::profile::VisionProfile;
 use eyekey::service::jobs::bundle;
 use eyekey::service::store;
 use eyekey::service::{AppState, Application, Config, ShutdownHandle};
+use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::profile::VisionProfile;
 use reqwest::{Response, StatusCode};
 use serde_json::{json, Value};
 use tokio::task::JoinHandle;

@@ -2,7 +2,7 @@ use reqwest::StatusCode;
 use serde_json::json;
 
 use crate::helpers::{expect_error, expect_json, myope, spawn_app};
-use eyekey::optics::profile::VisionProfile;
+use eyekey_core::physics::profile::VisionProfile;
 
 #[tokio::test]
 async fn a_profile_can_be_enrolled_read_listed_reenrolled_and_deleted() {

@@ -1,7 +1,7 @@
 //! Job execution: the worker pool, and the single worker step the tests drive by hand.
 //!
 //! A worker claims a job (see [`crate::service::store::jobs`]), loads and opens its inputs, and runs
-//! [`crate::pipeline::run_job`] on a blocking thread (the pipeline spreads its work over the rayon pool;
+//! [`eyekey_core::encoding::pipeline::run_job`] on a blocking thread (the pipeline spreads its work over the rayon pool;
 //! tokio's worker threads never solve). Meanwhile the async side renews the lease (every third of it,
 //! and at least every 500 ms), writes progress, and forwards a cancel request to the solver's flag.
 //! Output goes to `<data>/jobs/.tmp-<job>-<attempt>/` and is renamed to `<data>/jobs/<job>/` only when
@@ -22,9 +22,9 @@ use tokio::task::JoinSet;
 
 use super::state::AppState;
 use super::store::{self, jobs::JobRow, jobs::JobState};
-use crate::display::DisplayGeometry;
-use crate::optics::profile::VisionProfile;
-use crate::pipeline::{run_job, EncodeOptions, JobSpec, PipelineError};
+use eyekey_core::encoding::pipeline::{run_job, EncodeOptions, JobSpec, PipelineError};
+use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::profile::VisionProfile;
 
 /// A job id.
 pub type JobId = String;

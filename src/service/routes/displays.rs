@@ -10,12 +10,12 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::display::{DisplayError, DisplayGeometry};
 use crate::service::auth::{Operator, OPERATOR};
 use crate::service::crypto::{generate_token, token_hash};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
 use crate::service::store::{self, displays::DisplayRow, to_time};
+use eyekey_core::physics::display::{DisplayError, DisplayGeometry};
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {

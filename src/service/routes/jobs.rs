@@ -17,7 +17,6 @@ use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::pipeline::{EncodeOptions, Method, PipelineError};
 use crate::service::auth::{Operator, OPERATOR};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::BundleFile;
@@ -25,6 +24,7 @@ use crate::service::jobs::ObserverRef;
 use crate::service::state::{AppState, JobEvent};
 use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
 use crate::service::store::{self, to_time};
+use eyekey_core::encoding::pipeline::{EncodeOptions, Method, PipelineError};
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {

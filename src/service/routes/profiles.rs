@@ -9,11 +9,11 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::optics::profile::{ProfileError, VisionProfile};
 use crate::service::auth::{Operator, OPERATOR};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
 use crate::service::store::{self, profiles::ProfileRow, to_time};
+use eyekey_core::physics::profile::{ProfileError, VisionProfile};
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {

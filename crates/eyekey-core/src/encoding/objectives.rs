@@ -1,0 +1,444 @@
+//! Encoders (paper §6): turn objective images for several observers into one light field.
+//!
+//! * [`MultiplexObjective`]: Eq. 14 generalised to K weighted observers,
+//!   Σ_k w_k ‖A_k L − S'_k‖² (+ μ‖L‖²/P, a mean-square Tikhonov term), A_k = C_k ⊗ T_k.
+//! * [`DiffMaxObjective`]: Eq. 16, ‖A_t L − S'_t‖² − λ_W Σ_j ‖∂S_t/∂W_j‖² − λ_c ‖∂S_t/∂c‖², where
+//!   ∂S_t/∂W_j = (C_t ⊗ ∂T/∂W_j) L (analytic, see [`crate::physics::transport`]) and ∂S_a/∂c_na = T L_n, so
+//!   ‖∂S_t/∂c‖² = 3 Σ_n ‖T L_n‖². Non-convex; minimised by the monotone FISTA of [`crate::encoding::solver`].
+//!   The combined encoder adds the multiplex terms of further observers to it.
+//! * [`TiedViews`]: the spectral-only ablation, every view of a hole forced equal (a plain multiband display).
+//!
+//! Every term is divided by ‖S'_t‖² (the target's objective energy) so weights and λ's are relative.
+
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use crate::encoding::solver::Objective;
+use crate::physics::display::DisplayGeometry;
+use crate::physics::observer::Observer;
+
+/// One observer's least-squares term.
+pub struct Term<'a> {
+    /// The observer.
+    pub observer: &'a Observer,
+    /// What they should see, `[r·3 + a]` LMS.
+    pub objective: Vec<f32>,
+    /// Weight w_k.
+    pub weight: f64,
+}
+
+fn sq_norm(v: &[f32]) -> f64 {
+    v.par_iter().map(|x| (*x as f64) * (*x as f64)).sum()
+}
+
+/// Scratch buffers reused across evaluations (the solver calls the objective from one thread at a time).
+struct Scratch {
+    image: Vec<f32>,
+    field: Vec<f32>,
+}
+
+/// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖²/P over the P unknowns.
+pub struct MultiplexObjective<'a> {
+    terms: Vec<Term<'a>>,
+    n_unknowns: usize,
+    scale: f64,
+    tikhonov: f64,
+    scratch: Mutex<Scratch>,
+}
+
+impl<'a> MultiplexObjective<'a> {
+    /// Builds the objective; `reference_energy` (usually ‖S'_t‖²) normalises every data term, and the
+    /// Tikhonov weight μ applies to the mean square of L.
+    pub fn new(terms: Vec<Term<'a>>, n_bands: usize, reference_energy: f64, tikhonov: f64) -> Self {
+        assert!(!terms.is_empty(), "at least one observer");
+        let n_unknowns = terms[0].observer.transport.n_samples() * n_bands;
+        let tikhonov = tikhonov / n_unknowns.max(1) as f64;
+        let n_pixels = terms.iter().map(|t| t.observer.transport.n_pixels()).max().unwrap_or(0);
+        Self {
+            terms,
+            n_unknowns,
+            scale: 1.0 / reference_energy.max(1e-30),
+            tikhonov,
+            scratch: Mutex::new(Scratch {
+                image: vec![0f32; n_pixels * 3],
+                field: vec![0f32; n_unknowns],
+            }),
+        }
+    }
+
+    /// The terms.
+    pub fn terms(&self) -> &[Term<'a>] {
+        &self.terms
+    }
+
+    /// Each term's weighted, normalised residual w_k‖A_k L − S'_k‖²/‖S'_t‖² at `l`.
+    pub fn term_values(&self, l: &[f32]) -> Vec<f64> {
+        self.terms
+            .iter()
+            .map(|t| {
+                let view = t.observer.view(l);
+                let r: f64 = view
+                    .par_iter()
+                    .zip(t.objective.par_iter())
+                    .map(|(a, b)| ((a - b) as f64).powi(2))
+                    .sum();
+                t.weight * r * self.scale
+            })
+            .collect()
+    }
+}
+
+impl Objective for MultiplexObjective<'_> {
+    fn dim(&self) -> usize {
+        self.n_unknowns
+    }
+
+    fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let Scratch { image, field } = &mut *guard;
+        let mut f = 0.0;
+        let mu = self.tikhonov as f32;
+        grad.par_iter_mut()
+            .zip(l.par_iter())
+            .for_each(|(g, x)| *g = 2.0 * mu * x);
+        f += self.tikhonov * sq_norm(l);
+        for t in &self.terms {
+            let tr = &t.observer.transport;
+            let img = &mut image[..tr.n_pixels() * 3];
+            tr.forward_lms(l, &t.observer.coupling, img);
+            img.par_iter_mut()
+                .zip(t.objective.par_iter())
+                .for_each(|(a, b)| *a -= b);
+            f += t.weight * self.scale * sq_norm(img);
+            tr.adjoint_lms(img, &t.observer.coupling, field);
+            let c = (2.0 * t.weight * self.scale) as f32;
+            grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g += c * v);
+        }
+        f
+    }
+
+    fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let Scratch { image, field } = &mut *guard;
+        let mu = self.tikhonov as f32;
+        out.par_iter_mut()
+            .zip(v.par_iter())
+            .for_each(|(o, x)| *o = 2.0 * mu * x);
+        for t in &self.terms {
+            let tr = &t.observer.transport;
+            let img = &mut image[..tr.n_pixels() * 3];
+            tr.forward_lms(v, &t.observer.coupling, img);
+            tr.adjoint_lms(img, &t.observer.coupling, field);
+            let c = (2.0 * t.weight * self.scale) as f32;
+            out.par_iter_mut().zip(field.par_iter()).for_each(|(o, x)| *o += c * x);
+        }
+    }
+}
+
+/// Eq. 16 for the target, optionally plus multiplex terms for further observers (the combined encoder).
+pub struct DiffMaxObjective<'a> {
+    data: MultiplexObjective<'a>,
+    target: &'a Observer,
+    lambda_w: f64,
+    lambda_c: f64,
+    scale: f64,
+    n_bands: usize,
+}
+
+impl<'a> DiffMaxObjective<'a> {
+    /// `data` holds the target's term first (and any multiplex terms); the target's transport must carry the
+    /// derivative terms ∂T/∂W_j to penalise. λ's are relative to ‖S'_t‖² like the data terms.
+    pub fn new(data: MultiplexObjective<'a>, target: &'a Observer, lambda_w: f64, lambda_c: f64) -> Self {
+        let scale = data.scale;
+        let n_bands = target.coupling.len();
+        Self {
+            data,
+            target,
+            lambda_w,
+            lambda_c,
+            scale,
+            n_bands,
+        }
+    }
+
+    /// (‖∂S_t/∂W‖², ‖∂S_t/∂c‖²) at `l`, unnormalised.
+    pub fn derivative_norms(&self, l: &[f32]) -> (f64, f64) {
+        let tr = &self.target.transport;
+        let mut img = vec![0f32; tr.n_pixels() * 3];
+        let mut dw = 0.0;
+        for k in 0..tr.derivative_terms.len() {
+            tr.derivative_forward_lms(k, l, &self.target.coupling, &mut img);
+            dw += sq_norm(&img);
+        }
+        let mut dc = 0.0;
+        for sel in self.band_selectors() {
+            tr.forward_lms(l, &sel, &mut img);
+            dc += 3.0 * sq_norm(&img);
+        }
+        (dw, dc)
+    }
+
+    /// Couplings that route up to three bands at a time into the three output channels, so that
+    /// T L_n for every band comes out of ⌈N/3⌉ fused products.
+    fn band_selectors(&self) -> Vec<Vec<[f32; 3]>> {
+        (0..self.n_bands.div_ceil(3))
+            .map(|chunk| {
+                (0..self.n_bands)
+                    .map(|n| {
+                        let mut row = [0f32; 3];
+                        if n / 3 == chunk {
+                            row[n % 3] = 1.0;
+                        }
+                        row
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+impl Objective for DiffMaxObjective<'_> {
+    fn dim(&self) -> usize {
+        self.data.dim()
+    }
+
+    fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
+        let mut f = self.data.value_and_gradient(l, grad);
+        let tr = &self.target.transport;
+        let mut img = vec![0f32; tr.n_pixels() * 3];
+        let mut field = vec![0f32; l.len()];
+        // −λ_W Σ_j ‖D_j L‖²: gradient −2λ_W Σ_j D_jᵀ D_j L.
+        if self.lambda_w != 0.0 {
+            let c = (2.0 * self.lambda_w * self.scale) as f32;
+            for k in 0..tr.derivative_terms.len() {
+                tr.derivative_forward_lms(k, l, &self.target.coupling, &mut img);
+                f -= self.lambda_w * self.scale * sq_norm(&img);
+                tr.derivative_adjoint_lms(k, &img, &self.target.coupling, &mut field);
+                grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g -= c * v);
+            }
+        }
+        // −λ_c · 3 Σ_n ‖T L_n‖²: gradient −6λ_c Tᵀ T L_n per band.
+        if self.lambda_c != 0.0 {
+            let c = (6.0 * self.lambda_c * self.scale) as f32;
+            for sel in self.band_selectors() {
+                tr.forward_lms(l, &sel, &mut img);
+                f -= 3.0 * self.lambda_c * self.scale * sq_norm(&img);
+                tr.adjoint_lms(&img, &sel, &mut field);
+                grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g -= c * v);
+            }
+        }
+        f
+    }
+
+    fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
+        // The derivative terms are concave: the data terms alone bound the curvature from above.
+        self.data.curvature_product(v, out);
+    }
+}
+
+/// The spectral-only ablation: unknowns are one value per hole and band; every view of a hole is equal.
+pub struct TiedViews<'a, O: Objective + ?Sized> {
+    inner: &'a O,
+    display: &'a DisplayGeometry,
+}
+
+impl<'a, O: Objective + ?Sized> TiedViews<'a, O> {
+    /// Wraps an objective over full light fields.
+    pub fn new(inner: &'a O, display: &'a DisplayGeometry) -> Self {
+        Self { inner, display }
+    }
+
+    /// The full light field of per-hole values `x[(y·X + x)·N + n]`.
+    pub fn expand(&self, x: &[f32]) -> Vec<f32> {
+        crate::physics::transport::plain_light_field(self.display, x)
+    }
+
+    /// Sum over the views of each hole (the adjoint of [`Self::expand`]).
+    fn reduce(&self, full: &[f32], out: &mut [f32]) {
+        let d = self.display;
+        let n = d.n_bands();
+        out.par_chunks_mut(n).enumerate().for_each(|(h, o)| {
+            let (hx, hy) = (h as u32 % d.holes_x, h as u32 / d.holes_x);
+            o.iter_mut().for_each(|v| *v = 0.0);
+            for j in 0..d.views_v {
+                for i in 0..d.views_u {
+                    let p = d.sample_index(hx, hy, i, j);
+                    for (b, v) in o.iter_mut().enumerate() {
+                        *v += full[p * n + b];
+                    }
+                }
+            }
+        });
+    }
+}
+
+impl<O: Objective + ?Sized> Objective for TiedViews<'_, O> {
+    fn dim(&self) -> usize {
+        (self.display.holes_x * self.display.holes_y) as usize * self.display.n_bands()
+    }
+
+    fn value_and_gradient(&self, x: &[f32], grad: &mut [f32]) -> f64 {
+        let full = self.expand(x);
+        let mut g = vec![0f32; full.len()];
+        let f = self.inner.value_and_gradient(&full, &mut g);
+        self.reduce(&g, grad);
+        f
+    }
+
+    fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
+        let full = self.expand(v);
+        let mut g = vec![0f32; full.len()];
+        self.inner.curvature_product(&full, &mut g);
+        self.reduce(&g, out);
+    }
+}
+
+/// A high-contrast random mask the size of the retinal grid: independent black/white blocks of `block`
+/// pixels, as linear RGB, to be shown to a decoy observer.
+pub fn noise_decoy(width: u32, height: u32, block: u32, seed: u64) -> image::RgbImage {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let b = block.max(1);
+    let (bw, bh) = (width.div_ceil(b), height.div_ceil(b));
+    let cells: Vec<bool> = (0..bw * bh).map(|_| rng.gen()).collect();
+    image::RgbImage::from_fn(width, height, |x, y| {
+        let v = if cells[((y / b) * bw + x / b) as usize] { 255 } else { 0 };
+        image::Rgb([v, v, v])
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::encoding::solver::{minimise, SolverOptions};
+    use crate::physics::profile::VisionProfile;
+    use crate::physics::transport::{EyePosition, TransportOptions};
+    use std::sync::atomic::AtomicBool;
+
+    fn small_display() -> DisplayGeometry {
+        DisplayGeometry {
+            holes_x: 10,
+            holes_y: 8,
+            ..DisplayGeometry::paper()
+        }
+    }
+
+    fn observer(d: &DisplayGeometry, c4: f64, c7: f64, terms: Vec<usize>) -> Observer {
+        let mut p = VisionProfile::perfect();
+        p.zernike_um[4] = c4;
+        p.zernike_um[7] = c7;
+        let opts = TransportOptions {
+            sub_rays: 8,
+            derivative_terms: terms,
+            ..Default::default()
+        };
+        Observer::new(d, &p, EyePosition::default(), &opts).unwrap()
+    }
+
+    fn fd_check(obj: &dyn Objective, x: &[f32]) {
+        // Directional derivative against a central difference in f64 accumulation: 1 % (f32 products).
+        let mut g = vec![0f32; x.len()];
+        obj.value_and_gradient(x, &mut g);
+        let dir: Vec<f32> = (0..x.len()).map(|i| ((i * 7919 % 13) as f32 - 6.0) / 6.0).collect();
+        let h = 1e-2f32;
+        let xp: Vec<f32> = x.iter().zip(&dir).map(|(a, d)| a + h * d).collect();
+        let xm: Vec<f32> = x.iter().zip(&dir).map(|(a, d)| a - h * d).collect();
+        let fd = (obj.value(&xp) - obj.value(&xm)) / (2.0 * h as f64);
+        let an: f64 = g.iter().zip(&dir).map(|(a, b)| *a as f64 * *b as f64).sum();
+        assert!((fd - an).abs() <= 1e-2 * an.abs().max(1e-6), "fd {fd} vs analytic {an}");
+    }
+
+    #[test]
+    fn multiplex_and_diffmax_gradients_match_finite_differences() {
+        let d = small_display();
+        let t = observer(&d, 0.1, 0.2, vec![4, 7, 12]);
+        let r = observer(&d, -0.3, 0.0, vec![]);
+        let n = t.transport.n_samples() * d.n_bands();
+        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
+        let obj_t: Vec<f32> = (0..t.transport.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
+        let energy = obj_t.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
+        let mk = || {
+            MultiplexObjective::new(
+                vec![
+                    Term {
+                        observer: &t,
+                        objective: obj_t.clone(),
+                        weight: 1.0,
+                    },
+                    Term {
+                        observer: &r,
+                        objective: vec![0.2; r.transport.n_pixels() * 3],
+                        weight: 0.5,
+                    },
+                ],
+                d.n_bands(),
+                energy,
+                1e-3,
+            )
+        };
+        fd_check(&mk(), &x);
+        let dm = DiffMaxObjective::new(mk(), &t, 0.05, 0.02);
+        fd_check(&dm, &x);
+        let tied = TiedViews::new(&dm, &d);
+        let xt: Vec<f32> = (0..tied.dim()).map(|i| 0.2 + (i % 3) as f32 * 0.2).collect();
+        fd_check(&tied, &xt);
+    }
+
+    #[test]
+    fn multiplex_shows_two_observers_two_different_images() {
+        // Paper Fig. 11 in miniature: target and representative differ by 1 D of defocus; each is asked for a
+        // different half-tone pattern, and each must end up closer to its own objective than to the other's.
+        let d = small_display();
+        let t = observer(&d, 0.0, 0.0, vec![]);
+        let r = observer(&d, 1.3, 0.0, vec![]);
+        let np = t.transport.n_pixels();
+        let pat_a: Vec<f32> = (0..np * 3).map(|i| if (i / 3) % 2 == 0 { 0.5 } else { 0.1 }).collect();
+        let pat_b: Vec<f32> = (0..np * 3)
+            .map(|i| if (i / 3 / 10) % 2 == 0 { 0.5 } else { 0.1 })
+            .collect();
+        let energy = pat_a.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
+        let obj = MultiplexObjective::new(
+            vec![
+                Term {
+                    observer: &t,
+                    objective: pat_a.clone(),
+                    weight: 1.0,
+                },
+                Term {
+                    observer: &r,
+                    objective: pat_b.clone(),
+                    weight: 1.0,
+                },
+            ],
+            d.n_bands(),
+            energy,
+            0.0,
+        );
+        let opts = SolverOptions {
+            max_iterations: 300,
+            ..Default::default()
+        };
+        let res = minimise(
+            &obj,
+            vec![0.5; obj.dim()],
+            0.0,
+            1.0,
+            &opts,
+            &mut |_| {},
+            &AtomicBool::new(false),
+        );
+        let dist = |v: &[f32], p: &[f32]| v.iter().zip(p).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>();
+        let (vt, vr) = (t.view(&res.x), r.view(&res.x));
+        assert!(dist(&vt, &pat_a) < dist(&vt, &pat_b));
+        assert!(dist(&vr, &pat_b) < dist(&vr, &pat_a));
+        assert!(res.history.last().unwrap() < &res.history[0]);
+    }
+
+    #[test]
+    fn noise_decoy_is_high_contrast() {
+        let img = noise_decoy(40, 30, 2, 1);
+        let black = img.pixels().filter(|p| p[0] == 0).count();
+        assert!(black > 400 && black < 800, "{black}");
+    }
+}

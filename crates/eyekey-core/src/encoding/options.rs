@@ -1,0 +1,178 @@
+//! What an encode is asked to do: the encoder, its decoys and ablations, and the solver's limits.
+
+use crate::physics::display::DisplayGeometry;
+use serde::{Deserialize, Serialize};
+
+#[allow(unused_imports)]
+use super::pipeline::*;
+
+/// Which encoder to run (paper §6).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Multiplex image display (Eq. 14), generalised to K weighted observers.
+    #[default]
+    Multiplex,
+    /// Difference maximisation (Eq. 16).
+    Diffmax,
+    /// Multiplex objective plus the difference-maximisation terms.
+    Combined,
+}
+
+/// Restrict the encoder to one kind of key (paper Figs. 14–15).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum Ablation {
+    /// Every observer is given the target's spectral coupling, and difference maximisation drops its λ_c
+    /// term: only the optics differ.
+    Optical,
+    /// All views of a hole are forced equal (a plain multiband 2D display), and difference maximisation drops
+    /// its λ_W term.
+    Spectral,
+}
+
+/// What the decoy observers are shown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum DecoyKind {
+    /// A high-contrast random mask, a different one per decoy observer.
+    #[default]
+    Noise,
+    /// Uniform mid grey.
+    Grey,
+    /// The decoy image supplied with the job (noise where none is given).
+    Image,
+}
+
+/// Options of one encode; every field has a sensible default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default, deny_unknown_fields)]
+pub struct EncodeOptions {
+    /// The encoder.
+    pub method: Method,
+    /// Optional ablation.
+    pub ablation: Option<Ablation>,
+    /// Decoy observers sampled from the population, each shown a decoy (0 = only the given observers).
+    pub population_decoys: u32,
+    /// What decoy observers see.
+    pub decoy: DecoyKind,
+    /// Weight of each decoy observer's term relative to the target's (1.0).
+    pub decoy_weight: f64,
+    /// Seed for population sampling, jitter and noise decoys.
+    pub seed: u64,
+    /// Sub-rays traced per light-field sample (S).
+    pub sub_rays: u32,
+    /// Solver iteration cap.
+    pub max_iterations: u32,
+    /// Relative objective change below which the solver stops.
+    pub tolerance: f64,
+    /// λ_W of Eq. 16 (difference maximisation), relative to the data term.
+    pub lambda_w: f64,
+    /// λ_c of Eq. 16 (difference maximisation), relative to the data term.
+    pub lambda_c: f64,
+    /// People sampled from the population for the evaluation report (0 skips it).
+    pub evaluation_population: u32,
+    /// Head-movement robustness: besides the design position, the target must also read from four eye
+    /// positions this far off axis (mm; 0 = only the design position). Stacked observers, as in the
+    /// 2014 eyeglasses-free display.
+    pub head_radius_mm: f64,
+    /// Adaptive decoy rounds: after each solve, sample `adaptive_candidates` fresh people and add up to
+    /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
+    pub adaptive_rounds: u32,
+    /// People sampled per adaptive round.
+    pub adaptive_candidates: u32,
+    /// Decoys added per adaptive round at most.
+    pub adaptive_per_round: u32,
+    /// Camera decoys: an ideal 6 mm lens focused at −0.5 D and +0.5 D behind a filter passing one projector band
+    /// (the evaluation's strongest attacker), each shown a noise mask.
+    pub camera_decoys: bool,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        Self {
+            method: Method::Multiplex,
+            ablation: None,
+            population_decoys: 6,
+            decoy: DecoyKind::Noise,
+            decoy_weight: 1.0,
+            seed: 1,
+            sub_rays: 16,
+            max_iterations: 300,
+            tolerance: 1e-5,
+            lambda_w: 0.05,
+            lambda_c: 0.05,
+            evaluation_population: 20,
+            head_radius_mm: 0.0,
+            adaptive_rounds: 0,
+            adaptive_candidates: 24,
+            adaptive_per_round: 4,
+            camera_decoys: false,
+        }
+    }
+}
+
+impl EncodeOptions {
+    /// Checks every option's range; errors name the field.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let bad = |field: &str, why: String| Err(PipelineError::Invalid(format!("options.{field}: {why}")));
+        if !(1..=256).contains(&self.sub_rays) {
+            return bad("sub_rays", format!("must be within 1..=256, got {}", self.sub_rays));
+        }
+        if !(1..=20_000).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                format!("must be within 1..=20000, got {}", self.max_iterations),
+            );
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return bad("tolerance", format!("must be within (0, 1), got {}", self.tolerance));
+        }
+        if self.population_decoys > 64 {
+            return bad(
+                "population_decoys",
+                format!("at most 64, got {}", self.population_decoys),
+            );
+        }
+        if !(self.decoy_weight.is_finite() && (0.0..=100.0).contains(&self.decoy_weight)) {
+            return bad(
+                "decoy_weight",
+                format!("must be within 0..=100, got {}", self.decoy_weight),
+            );
+        }
+        for (name, v) in [("lambda_w", self.lambda_w), ("lambda_c", self.lambda_c)] {
+            if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
+                return bad(name, format!("must be within 0..=100, got {v}"));
+            }
+        }
+        if !(self.head_radius_mm.is_finite() && (0.0..=20.0).contains(&self.head_radius_mm)) {
+            return bad(
+                "head_radius_mm",
+                format!("must be within 0..=20 mm, got {}", self.head_radius_mm),
+            );
+        }
+        if self.adaptive_rounds > 5 || self.adaptive_candidates > 200 || self.adaptive_per_round > 16 {
+            return bad(
+                "adaptive_rounds",
+                "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
+            );
+        }
+        if self.evaluation_population > 2000 {
+            return bad(
+                "evaluation_population",
+                format!("at most 2000, got {}", self.evaluation_population),
+            );
+        }
+        Ok(())
+    }
+}
+
+pub(crate) fn aspect_matches(img: &image::RgbImage, display: &DisplayGeometry) -> bool {
+    let a = img.width() as f64 / img.height() as f64;
+    let b = display.holes_x as f64 / display.holes_y as f64;
+    (a / b - 1.0).abs() <= 0.05
+}

@@ -1,0 +1,47 @@
+//! What an evaluation looks at, and how hard.
+
+use serde::{Deserialize, Serialize};
+
+#[allow(unused_imports)]
+use super::*;
+
+/// Options of an evaluation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(default)]
+pub struct EvaluationOptions {
+    /// People sampled from the population statistics.
+    pub population: u32,
+    /// Seed of the population sample (different from the encoder's decoys by construction).
+    pub seed: u64,
+    /// Legibility threshold.
+    pub threshold: f64,
+    /// Sub-rays per sample in the evaluation's transport (its own jitter seed).
+    pub sub_rays: u32,
+    /// Camera focus errors swept, dioptres.
+    pub camera_focus_d: Vec<f64>,
+    /// Camera apertures tried, mm.
+    pub camera_apertures_mm: Vec<f64>,
+    /// Random directions for the key-sensitivity scan (0 skips it).
+    pub key_directions: u32,
+    /// Eye offsets (mm) for the head-movement scan (empty skips it).
+    pub head_offsets_mm: Vec<f64>,
+    /// Population views saved as pictures.
+    pub saved_population_views: u32,
+}
+
+impl Default for EvaluationOptions {
+    fn default() -> Self {
+        Self {
+            population: 20,
+            seed: 20_000,
+            threshold: DEFAULT_THRESHOLD,
+            sub_rays: 16,
+            camera_focus_d: vec![-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0],
+            camera_apertures_mm: vec![2.0, 4.0, 6.0],
+            key_directions: 3,
+            head_offsets_mm: vec![0.5, 1.0, 2.0, 4.0],
+            saved_population_views: 3,
+        }
+    }
+}

@@ -1,0 +1,62 @@
+//! The document as the evaluation sees it: luminance on the retinal grid at the objective's level.
+
+use crate::imaging;
+use crate::physics::observer::Observer;
+use image::RgbImage;
+
+#[allow(unused_imports)]
+use super::*;
+
+/// The document as the evaluation sees it: luminance on the retinal grid and the objective's level.
+pub struct Reference {
+    /// Document luminance (linear, 0..1), row-major on the retinal grid.
+    pub document: Vec<f32>,
+    /// Grid width.
+    pub width: usize,
+    /// Grid height.
+    pub height: usize,
+    /// The objective level (fraction of the display white the target was asked to see).
+    pub level: f64,
+    /// Legibility threshold.
+    pub threshold: f64,
+}
+
+impl Reference {
+    /// From an sRGB document resized to the retinal grid.
+    pub fn new(document: &RgbImage, width: u32, height: u32, level: f64, threshold: f64) -> Self {
+        let resized = imaging::resize(document, width, height);
+        Self {
+            document: image_luminance(&resized),
+            width: width as usize,
+            height: height as usize,
+            level,
+            threshold,
+        }
+    }
+
+    /// Scores a luminance view; `white_luminance` is the viewer's luminance of the display's full white.
+    pub fn score(&self, label: &str, view_luminance: &[f32], white_luminance: f64) -> ViewScore {
+        let leg = legibility(view_luminance, &self.document, self.width, self.height);
+        let norm: Vec<f32> = view_luminance
+            .iter()
+            .map(|v| (*v as f64 / white_luminance) as f32)
+            .collect();
+        let objective: Vec<f32> = self.document.iter().map(|v| (*v as f64 * self.level) as f32).collect();
+        ViewScore {
+            label: label.to_string(),
+            legibility: leg,
+            ncc: ncc(view_luminance, &self.document),
+            psnr_db: psnr(&norm, &objective, self.level),
+            ssim: ssim(&norm, &objective, self.width, self.height, self.level),
+            readable: leg >= self.threshold,
+        }
+    }
+
+    /// Scores what `observer` sees of light field `l`; returns the score and the picture.
+    pub fn score_observer(&self, label: &str, observer: &Observer, l: &[f32]) -> (ViewScore, RgbImage) {
+        let view = observer.view(l);
+        let lum = luminance(&view);
+        let white = 0.689_902_7 * observer.white[0] + 0.348_321_9 * observer.white[1];
+        (self.score(label, &lum, white), observer.picture(&view))
+    }
+}

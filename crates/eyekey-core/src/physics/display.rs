@@ -1,0 +1,372 @@
+//! The 5D light-field display (paper §5): a barrier of holes in front of a rear-projected multiband screen.
+//!
+//! Conventions (DESIGN §2): X×Y holes at pitch `hole_pitch_mm` in the barrier plane (z = 0), the screen at
+//! distance `gap_mm` behind it. Behind each hole lie U×V screen pixels at pitch `screen_pixel_pitch_mm`; the
+//! pixel at offset (i, j) sends its light through the hole with slope −offset/g (Eq. 13's light field
+//! L(x, y, u, v, n) is the set of N projector frames). The blocks behind the holes are aimed at the design eye
+//! position, so the block pitch is p_h·(1 + g/d) rather than p_h.
+
+use serde::{Deserialize, Serialize};
+
+use crate::physics::spectral::ProjectorSpectrum;
+
+/// Errors in a display description. Every message names the field.
+#[derive(Debug, thiserror::Error, PartialEq)]
+#[non_exhaustive]
+pub enum DisplayError {
+    /// A numeric field is outside its physical range.
+    #[error("{field} must be within {min}..={max} {unit}, got {value}")]
+    OutOfRange {
+        /// The field's name.
+        field: &'static str,
+        /// The offending value.
+        value: f64,
+        /// Lower bound.
+        min: f64,
+        /// Upper bound.
+        max: f64,
+        /// Unit of the bounds.
+        unit: &'static str,
+    },
+    /// A combination of fields is inconsistent.
+    #[error("{field}: {reason}")]
+    Inconsistent {
+        /// The field's name.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A projector spectrum is invalid.
+    #[error("projectors[{index}]: {reason}")]
+    Projector {
+        /// Index of the projector.
+        index: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An unknown preset name.
+    #[error("unknown display preset {0:?} (known: paper, secure, small)")]
+    UnknownPreset(String),
+}
+
+/// Geometry and spectra of a 5D light-field display, plus the viewing distance it is designed for.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct DisplayGeometry {
+    /// Holes across (X).
+    pub holes_x: u32,
+    /// Holes down (Y).
+    pub holes_y: u32,
+    /// Centre-to-centre distance of the holes, mm.
+    pub hole_pitch_mm: f64,
+    /// Diameter of each (circular) hole, mm.
+    pub hole_diameter_mm: f64,
+    /// Screen pixels behind each hole, horizontally (U).
+    pub views_u: u32,
+    /// Screen pixels behind each hole, vertically (V).
+    pub views_v: u32,
+    /// Screen pixel pitch, mm (U·p_s ≤ p_h).
+    pub screen_pixel_pitch_mm: f64,
+    /// Distance from the screen to the barrier, mm.
+    pub gap_mm: f64,
+    /// Design viewing distance from the barrier to the pupil, mm.
+    pub viewing_distance_mm: f64,
+    /// One spectral power distribution per projector (band).
+    #[cfg_attr(feature = "openapi", schema(value_type = Vec<Object>))]
+    pub projectors: Vec<ProjectorSpectrum>,
+    /// Largest light-field value a projector pixel can emit (Eq. 15); frames store L / L_max.
+    pub l_max: f64,
+}
+
+/// Names of the built-in presets.
+pub const PRESETS: &[&str] = &["paper", "secure", "small"];
+
+impl DisplayGeometry {
+    /// The paper's synthesized setup (§7.3): 100×100 holes, 5×5 views, 4 narrow-band projectors.
+    ///
+    /// Numbers: hole pitch 0.4 mm (a 40 mm square barrier), U = V = 5 screen pixels of 0.08 mm behind each
+    /// hole (filling the pitch), gap 33.3 mm, viewing distance 500 mm. Adjacent views are then
+    /// p_s·d/g = 1.2 mm apart at the pupil, so the 5 views of a hole span 6 mm: about 3×3 to 5×5 of them
+    /// cross a 6 mm pupil, which is what lets the light field act on the eye's aberrations. A hole of
+    /// 0.08 mm (one screen pixel) keeps each view's footprint at the pupil to (p_s + hole)·d/g = 2.4 mm.
+    pub fn paper() -> Self {
+        Self {
+            holes_x: 100,
+            holes_y: 100,
+            hole_pitch_mm: 0.4,
+            hole_diameter_mm: 0.08,
+            views_u: 5,
+            views_v: 5,
+            screen_pixel_pitch_mm: 0.08,
+            gap_mm: 0.08 * 500.0 / 1.2,
+            viewing_distance_mm: 500.0,
+            projectors: crate::physics::spectral::paper_projectors(),
+            l_max: 1.0,
+        }
+    }
+
+    /// A denser-in-angle display chosen for secrecy: 9×9 views across the pupil, 48×48 holes at 0.3 mm.
+    ///
+    /// View spacing at the pupil is p_s·d/g = 0.75 mm, so 9 views span 6.75 mm and roughly 7×7 of them
+    /// cross a 6 mm pupil: more angular freedom per hole lets decoys and the target's image coexist.
+    pub fn secure() -> Self {
+        let p_s = 0.3 / 9.0;
+        Self {
+            holes_x: 48,
+            holes_y: 48,
+            hole_pitch_mm: 0.3,
+            hole_diameter_mm: p_s,
+            views_u: 9,
+            views_v: 9,
+            screen_pixel_pitch_mm: p_s,
+            gap_mm: p_s * 500.0 / 0.75,
+            viewing_distance_mm: 500.0,
+            projectors: crate::physics::spectral::paper_projectors(),
+            l_max: 1.0,
+        }
+    }
+
+    /// A small display for tests and quick demos: 24×24 holes, 5×5 views, the `paper` optics.
+    pub fn small() -> Self {
+        Self {
+            holes_x: 24,
+            holes_y: 24,
+            ..Self::paper()
+        }
+    }
+
+    /// A preset by name (`paper`, `secure`, `small`).
+    pub fn preset(name: &str) -> Result<Self, DisplayError> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "secure" => Ok(Self::secure()),
+            "small" => Ok(Self::small()),
+            other => Err(DisplayError::UnknownPreset(other.to_string())),
+        }
+    }
+
+    /// Checks every field against its physical range and the fields against each other.
+    pub fn validate(&self) -> Result<(), DisplayError> {
+        fn range(field: &'static str, v: f64, min: f64, max: f64, unit: &'static str) -> Result<(), DisplayError> {
+            if v.is_finite() && v >= min && v <= max {
+                Ok(())
+            } else {
+                Err(DisplayError::OutOfRange {
+                    field,
+                    value: v,
+                    min,
+                    max,
+                    unit,
+                })
+            }
+        }
+        range("holes_x", self.holes_x as f64, 1.0, 1024.0, "holes")?;
+        range("holes_y", self.holes_y as f64, 1.0, 1024.0, "holes")?;
+        range("views_u", self.views_u as f64, 1.0, 32.0, "views")?;
+        range("views_v", self.views_v as f64, 1.0, 32.0, "views")?;
+        range("hole_pitch_mm", self.hole_pitch_mm, 0.01, 10.0, "mm")?;
+        range("hole_diameter_mm", self.hole_diameter_mm, 0.001, 10.0, "mm")?;
+        range("screen_pixel_pitch_mm", self.screen_pixel_pitch_mm, 0.001, 10.0, "mm")?;
+        range("gap_mm", self.gap_mm, 0.1, 1000.0, "mm")?;
+        range("viewing_distance_mm", self.viewing_distance_mm, 50.0, 10000.0, "mm")?;
+        range("l_max", self.l_max, 1e-6, 1e6, "")?;
+        if self.hole_diameter_mm > self.hole_pitch_mm {
+            return Err(DisplayError::Inconsistent {
+                field: "hole_diameter_mm",
+                reason: format!(
+                    "a hole of {} mm does not fit the hole pitch of {} mm",
+                    self.hole_diameter_mm, self.hole_pitch_mm
+                ),
+            });
+        }
+        let block = self.views_u.max(self.views_v) as f64 * self.screen_pixel_pitch_mm;
+        if block > self.hole_pitch_mm * (1.0 + 1e-9) {
+            return Err(DisplayError::Inconsistent {
+                field: "screen_pixel_pitch_mm",
+                reason: format!(
+                    "{} views of {} mm ({} mm) exceed the hole pitch of {} mm (U·p_s ≤ p_h)",
+                    self.views_u.max(self.views_v),
+                    self.screen_pixel_pitch_mm,
+                    block,
+                    self.hole_pitch_mm
+                ),
+            });
+        }
+        if self.projectors.is_empty() || self.projectors.len() > 16 {
+            return Err(DisplayError::Inconsistent {
+                field: "projectors",
+                reason: format!("between 1 and 16 projectors are needed, got {}", self.projectors.len()),
+            });
+        }
+        for (index, p) in self.projectors.iter().enumerate() {
+            p.validate().map_err(|e| DisplayError::Projector {
+                index,
+                reason: e.to_string(),
+            })?;
+        }
+        let samples = self.n_samples_per_band() as u64 * self.projectors.len() as u64;
+        if samples > 64_000_000 {
+            return Err(DisplayError::Inconsistent {
+                field: "holes_x",
+                reason: format!("the light field has {samples} unknowns; at most 64000000 are supported"),
+            });
+        }
+        Ok(())
+    }
+
+    /// Number of projector bands N.
+    pub fn n_bands(&self) -> usize {
+        self.projectors.len()
+    }
+
+    /// Light-field samples per band: X·Y·U·V.
+    pub fn n_samples_per_band(&self) -> usize {
+        (self.holes_x * self.holes_y * self.views_u * self.views_v) as usize
+    }
+
+    /// Width and height of one projector frame in pixels: (X·U, Y·V).
+    pub fn frame_size(&self) -> (u32, u32) {
+        (self.holes_x * self.views_u, self.holes_y * self.views_v)
+    }
+
+    /// Centre of hole (x, y) in the barrier plane, mm, origin at the barrier's centre.
+    pub fn hole_centre_mm(&self, x: u32, y: u32) -> [f64; 2] {
+        [
+            (x as f64 - (self.holes_x as f64 - 1.0) / 2.0) * self.hole_pitch_mm,
+            (y as f64 - (self.holes_y as f64 - 1.0) / 2.0) * self.hole_pitch_mm,
+        ]
+    }
+
+    /// Centre of screen pixel (i, j) behind hole (x, y), in screen-plane coordinates (mm, same axes).
+    ///
+    /// The block behind each hole is centred on the line from the design eye position (on axis) through
+    /// the hole: block centre = h·(1 + g/d) (DESIGN §2).
+    pub fn screen_pixel_centre_mm(&self, x: u32, y: u32, i: u32, j: u32) -> [f64; 2] {
+        let h = self.hole_centre_mm(x, y);
+        let aim = 1.0 + self.gap_mm / self.viewing_distance_mm;
+        [
+            h[0] * aim + (i as f64 - (self.views_u as f64 - 1.0) / 2.0) * self.screen_pixel_pitch_mm,
+            h[1] * aim + (j as f64 - (self.views_v as f64 - 1.0) / 2.0) * self.screen_pixel_pitch_mm,
+        ]
+    }
+
+    /// Distance between adjacent views where they cross the pupil plane, mm: p_s·d/g.
+    pub fn view_spacing_at_pupil_mm(&self) -> f64 {
+        self.screen_pixel_pitch_mm * self.viewing_distance_mm / self.gap_mm
+    }
+
+    /// Barrier width and height, mm.
+    pub fn extent_mm(&self) -> [f64; 2] {
+        [
+            self.holes_x as f64 * self.hole_pitch_mm,
+            self.holes_y as f64 * self.hole_pitch_mm,
+        ]
+    }
+
+    /// Index of light-field sample (x, y, i, j) within one band, in frame (row-major) order:
+    /// pixel (x·U + i, y·V + j) of an (X·U)×(Y·V) frame.
+    pub fn sample_index(&self, x: u32, y: u32, i: u32, j: u32) -> usize {
+        let width = (self.holes_x * self.views_u) as usize;
+        (y * self.views_v + j) as usize * width + (x * self.views_u + i) as usize
+    }
+
+    /// Inverse of [`Self::sample_index`]: (x, y, i, j).
+    pub fn sample_coords(&self, index: usize) -> (u32, u32, u32, u32) {
+        let width = (self.holes_x * self.views_u) as usize;
+        let (row, col) = ((index / width) as u32, (index % width) as u32);
+        (
+            col / self.views_u,
+            row / self.views_v,
+            col % self.views_u,
+            row % self.views_v,
+        )
+    }
+
+    /// The barrier mask as a binary image at `pixels_per_hole` pixels per hole pitch (1 = open).
+    pub fn barrier_mask(&self, pixels_per_hole: u32) -> (u32, u32, Vec<u8>) {
+        let k = pixels_per_hole.max(1);
+        let (w, h) = (self.holes_x * k, self.holes_y * k);
+        let radius = self.hole_diameter_mm / 2.0;
+        let px = self.hole_pitch_mm / k as f64;
+        let mut mask = vec![0u8; (w * h) as usize];
+        for py in 0..h {
+            for pxi in 0..w {
+                // Offset of this mask pixel's centre from its hole's centre.
+                let ox = ((pxi % k) as f64 + 0.5) * px - self.hole_pitch_mm / 2.0;
+                let oy = ((py % k) as f64 + 0.5) * px - self.hole_pitch_mm / 2.0;
+                // A hole smaller than a mask pixel still opens the pixel it falls in.
+                let open = ox * ox + oy * oy <= radius * radius || (ox.abs() <= px / 2.0 && oy.abs() <= px / 2.0);
+                mask[(py * w + pxi) as usize] = if open { 255 } else { 0 };
+            }
+        }
+        (w, h, mask)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_valid_and_paper_has_the_papers_resolution() {
+        for name in PRESETS {
+            DisplayGeometry::preset(name).unwrap().validate().unwrap();
+        }
+        let p = DisplayGeometry::paper();
+        assert_eq!(
+            (p.holes_x, p.holes_y, p.views_u, p.views_v, p.n_bands()),
+            (100, 100, 5, 5, 4)
+        );
+        // 5 views span 5 × 1.2 mm = 6 mm: several views cross a 6 mm pupil.
+        assert!((p.view_spacing_at_pupil_mm() - 1.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn sample_index_round_trips() {
+        let d = DisplayGeometry::small();
+        for idx in [0, 1, 7, 123, d.n_samples_per_band() - 1] {
+            let (x, y, i, j) = d.sample_coords(idx);
+            assert_eq!(d.sample_index(x, y, i, j), idx);
+        }
+    }
+
+    #[test]
+    fn block_aims_every_hole_at_the_design_eye() {
+        // The chief ray from the block centre through any hole reaches the pupil plane on axis.
+        let d = DisplayGeometry::paper();
+        let (x, y) = (3, 91);
+        let h = d.hole_centre_mm(x, y);
+        let (cu, cv) = ((d.views_u - 1) / 2, (d.views_v - 1) / 2);
+        let q = d.screen_pixel_centre_mm(x, y, cu, cv);
+        for a in 0..2 {
+            let slope = (h[a] - q[a]) / d.gap_mm;
+            let at_pupil = h[a] + d.viewing_distance_mm * slope;
+            assert!(at_pupil.abs() < 1e-9, "axis {a}: {at_pupil}");
+        }
+    }
+
+    #[test]
+    fn validation_names_the_field() {
+        let mut d = DisplayGeometry::paper();
+        d.viewing_distance_mm = 5.0;
+        assert!(d.validate().unwrap_err().to_string().contains("viewing_distance_mm"));
+        let mut d = DisplayGeometry::paper();
+        d.screen_pixel_pitch_mm = 0.2;
+        assert!(d.validate().unwrap_err().to_string().contains("screen_pixel_pitch_mm"));
+        let mut d = DisplayGeometry::paper();
+        d.hole_pitch_mm = f64::NAN;
+        assert!(d.validate().unwrap_err().to_string().contains("hole_pitch_mm"));
+        assert!(DisplayGeometry::preset("nope").is_err());
+    }
+
+    #[test]
+    fn barrier_mask_opens_one_spot_per_hole() {
+        let d = DisplayGeometry::small();
+        let (w, h, m) = d.barrier_mask(5);
+        assert_eq!((w, h), (120, 120));
+        let open = m.iter().filter(|&&v| v == 255).count();
+        assert!(open >= (d.holes_x * d.holes_y) as usize);
+        assert!(open < (w * h) as usize / 4);
+    }
+}

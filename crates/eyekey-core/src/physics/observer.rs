@@ -1,0 +1,112 @@
+//! An observer of the display: one person (or camera) at one eye position, with their transport operator and
+//! their spectral coupling (Eq. 13: S_a = Σ_n c_na T L_n).
+
+use std::sync::Arc;
+
+use image::RgbImage;
+
+use crate::imaging;
+use crate::physics::display::DisplayGeometry;
+use crate::physics::profile::{ProfileError, VisionProfile};
+use crate::physics::spectral::{coupling, ConeFundamentals};
+use crate::physics::transport::{EyePosition, TransportCache, TransportError, TransportMatrix, TransportOptions};
+use crate::physics::zernike::ZernikeCoefficients;
+
+/// Errors building an observer.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ObserverError {
+    /// The profile is invalid.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+    /// The transport build failed.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+}
+
+/// One observer: transport operator plus spectral coupling.
+#[derive(Clone, Debug)]
+pub struct Observer {
+    /// Transport from the light field to this observer's retinal grid.
+    pub transport: Arc<TransportMatrix>,
+    /// c_na per band n, as f32 for the kernels.
+    pub coupling: Vec<[f32; 3]>,
+    /// c_na per band n.
+    pub coupling_f64: Vec<[f64; 3]>,
+    /// The LMS of the display's white (every projector at L_max) for this observer.
+    pub white: [f64; 3],
+}
+
+impl Observer {
+    /// Builds the observer for `profile` at `eye`.
+    pub fn new(
+        display: &DisplayGeometry,
+        profile: &VisionProfile,
+        eye: EyePosition,
+        options: &TransportOptions,
+    ) -> Result<Self, ObserverError> {
+        profile.validate()?;
+        let wavefront = profile.effective_wavefront()?;
+        Self::from_parts(display, &wavefront, &profile.cone_fundamentals(), eye, options)
+    }
+
+    /// Builds an observer from a wavefront at the viewing pupil and cone fundamentals.
+    pub fn from_parts(
+        display: &DisplayGeometry,
+        wavefront: &ZernikeCoefficients,
+        cones: &ConeFundamentals,
+        eye: EyePosition,
+        options: &TransportOptions,
+    ) -> Result<Self, ObserverError> {
+        let transport = TransportCache::global().get_or_build(display, wavefront, eye, options)?;
+        let c = coupling(&display.projectors, cones);
+        Ok(Self::with_coupling(transport, c.c, display.l_max))
+    }
+
+    /// An observer from a transport operator and a coupling matrix.
+    pub fn with_coupling(transport: Arc<TransportMatrix>, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
+        let white = std::array::from_fn(|a| coupling_f64.iter().map(|c| c[a]).sum::<f64>() * l_max);
+        let coupling = coupling_f64
+            .iter()
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        Self {
+            transport,
+            coupling,
+            coupling_f64,
+            white,
+        }
+    }
+
+    /// The LMS retinal image `[r·3 + a]` of light field `l`.
+    pub fn view(&self, l: &[f32]) -> Vec<f32> {
+        let mut out = vec![0f32; self.transport.n_pixels() * 3];
+        self.transport.forward_lms(l, &self.coupling, &mut out);
+        out
+    }
+
+    /// What this observer perceives of `view`, as an sRGB picture.
+    pub fn picture(&self, view: &[f32]) -> RgbImage {
+        let g = self.transport.grid;
+        imaging::lms_to_srgb_image(view, g.width, g.height, self.white)
+    }
+
+    /// The objective LMS image for this observer of an sRGB image (resized to the retinal grid).
+    pub fn objective(&self, img: &RgbImage, level: f64) -> Vec<f32> {
+        let g = self.transport.grid;
+        let resized = imaging::resize(img, g.width, g.height);
+        imaging::objective_lms(&imaging::linear_rgb(&resized), self.white, level)
+    }
+}
+
+/// The light field of an ordinary 2D picture on the display: the document resampled to one value per hole,
+/// turned into projector intensities for the standard observer, every view of a hole equal (paper Fig. 13).
+pub fn plain_light_field_for_image(display: &DisplayGeometry, img: &RgbImage) -> Vec<f32> {
+    let resized = imaging::resize(img, display.holes_x, display.holes_y);
+    let c = coupling(&display.projectors, crate::physics::spectral::stockman_sharpe_2deg());
+    let per_hole: Vec<f32> = imaging::plain_intensities(&imaging::linear_rgb(&resized), &c.c)
+        .into_iter()
+        .map(|v| v * display.l_max as f32)
+        .collect();
+    crate::physics::transport::plain_light_field(display, &per_hole)
+}

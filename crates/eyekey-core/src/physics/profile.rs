@@ -1,0 +1,197 @@
+//! A person's vision profile: the key that decodes an eyekey light field.
+//!
+//! Optical part: Zernike wavefront (OSA/ANSI Z80.28, µm at a stated pupil) and an optional spectacle
+//! prescription; spectral part: the CIE 2006 / Asano 2016 individual-observer parameters or a sampled LMS table.
+
+use serde::{Deserialize, Serialize};
+
+use crate::physics::spectral::{ConeFundamentals, SpectralSensitivity};
+use crate::physics::zernike::{Prescription, ZernikeCoefficients};
+
+/// Errors in a vision profile; every message names the field.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ProfileError {
+    /// A field is outside its physical range or malformed.
+    #[error("{field}: {reason}")]
+    Invalid {
+        /// Dotted path of the field.
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The JSON could not be parsed.
+    #[error("profile JSON: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Largest accepted |Zernike coefficient|, µm. Uncorrected eyes reach a few µm of defocus; 20 µm is far
+/// beyond any eye an aberrometer measures, and rejects mm-for-µm unit mistakes.
+pub const MAX_COEFFICIENT_UM: f64 = 20.0;
+
+/// One person's vision profile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct VisionProfile {
+    /// Entrance-pupil diameter while viewing the display, mm (2–9).
+    pub pupil_diameter_mm: f64,
+    /// OSA/ANSI Zernike coefficients, µm, index j = (n(n+2)+m)/2, stated for `zernike_pupil_diameter_mm`.
+    pub zernike_um: Vec<f64>,
+    /// Pupil diameter the coefficients were measured at, mm; defaults to `pupil_diameter_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zernike_pupil_diameter_mm: Option<f64>,
+    /// Refractive error in prescription form (sphere/cylinder/axis, as an optometrist writes it), not
+    /// corrected while viewing: its C(2,0) and C(2,±2) add to the Zernike terms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
+    pub prescription: Option<Prescription>,
+    /// Cone spectral sensitivities.
+    #[serde(default)]
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
+    pub spectral: SpectralSensitivity,
+}
+
+impl VisionProfile {
+    /// A perfect eye with the standard observer's cones and a 6 mm pupil.
+    pub fn perfect() -> Self {
+        Self {
+            pupil_diameter_mm: 6.0,
+            zernike_um: vec![0.0; 28],
+            zernike_pupil_diameter_mm: None,
+            prescription: None,
+            spectral: SpectralSensitivity::default(),
+        }
+    }
+
+    /// Parses and validates a profile from JSON.
+    pub fn from_json(text: &str) -> Result<Self, ProfileError> {
+        let p: Self = serde_json::from_str(text)?;
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Checks finiteness and physical ranges.
+    pub fn validate(&self) -> Result<(), ProfileError> {
+        let bad = |field: &str, reason: String| ProfileError::Invalid {
+            field: field.to_string(),
+            reason,
+        };
+        if !(self.pupil_diameter_mm.is_finite() && (2.0..=9.0).contains(&self.pupil_diameter_mm)) {
+            return Err(bad(
+                "pupil_diameter_mm",
+                format!("must be within 2..=9 mm, got {}", self.pupil_diameter_mm),
+            ));
+        }
+        if let Some(z) = self.zernike_pupil_diameter_mm {
+            if !(z.is_finite() && (2.0..=10.0).contains(&z)) {
+                return Err(bad(
+                    "zernike_pupil_diameter_mm",
+                    format!("must be within 2..=10 mm, got {z}"),
+                ));
+            }
+            if z + 1e-9 < self.pupil_diameter_mm {
+                return Err(bad(
+                    "zernike_pupil_diameter_mm",
+                    format!(
+                        "coefficients measured at {z} mm cannot describe a larger {} mm pupil",
+                        self.pupil_diameter_mm
+                    ),
+                ));
+            }
+        }
+        if self.zernike_um.len() > 66 {
+            return Err(bad(
+                "zernike_um",
+                format!("at most 66 terms (order 10), got {}", self.zernike_um.len()),
+            ));
+        }
+        for (j, c) in self.zernike_um.iter().enumerate() {
+            if !c.is_finite() || c.abs() > MAX_COEFFICIENT_UM {
+                return Err(bad(
+                    &format!("zernike_um[{j}]"),
+                    format!("must be finite with |c| ≤ {MAX_COEFFICIENT_UM} µm, got {c}"),
+                ));
+            }
+        }
+        if let Some(p) = &self.prescription {
+            p.validate().map_err(|e| bad("prescription", e.to_string()))?;
+        }
+        self.spectral.validate().map_err(|e| bad("spectral", e.to_string()))?;
+        Ok(())
+    }
+
+    /// The wavefront the display meets: coefficients rescaled to the viewing pupil (ISO 24157 Annex B), with
+    /// the prescription's defocus and astigmatism added, piston and tilt removed (tilt only shifts the
+    /// whole retinal image).
+    pub fn effective_wavefront(&self) -> Result<ZernikeCoefficients, ProfileError> {
+        let bad = |reason: String| ProfileError::Invalid {
+            field: "zernike_um".into(),
+            reason,
+        };
+        let measured = self.zernike_pupil_diameter_mm.unwrap_or(self.pupil_diameter_mm);
+        let z = ZernikeCoefficients::new(measured, self.zernike_um.clone()).map_err(|e| bad(e.to_string()))?;
+        let mut z = z.rescaled(self.pupil_diameter_mm).map_err(|e| bad(e.to_string()))?;
+        if z.coefficients_um.len() < 28 {
+            z.coefficients_um.resize(28, 0.0);
+        }
+        if let Some(p) = &self.prescription {
+            // The refractive error's wavefront (Thibos power vectors) adds to the measured one.
+            let lens = ZernikeCoefficients::from_prescription(p, self.pupil_diameter_mm);
+            for j in 3..=5 {
+                z.coefficients_um[j] += lens.get(j);
+            }
+        }
+        Ok(z.with_order_range_zeroed(0..=1))
+    }
+
+    /// The person's cone fundamentals.
+    pub fn cone_fundamentals(&self) -> ConeFundamentals {
+        self.spectral.cone_fundamentals()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn perfect_profile_round_trips_through_json() {
+        let p = VisionProfile::perfect();
+        let text = serde_json::to_string(&p).unwrap();
+        let q = VisionProfile::from_json(&text).unwrap();
+        assert_eq!(p, q);
+    }
+
+    #[test]
+    fn a_60_mm_pupil_is_refused_naming_the_field() {
+        let mut p = VisionProfile::perfect();
+        p.pupil_diameter_mm = 60.0;
+        let e = p.validate().unwrap_err().to_string();
+        assert!(e.contains("pupil_diameter_mm"), "{e}");
+    }
+
+    #[test]
+    fn bad_coefficients_and_unknown_fields_are_refused() {
+        let mut p = VisionProfile::perfect();
+        p.zernike_um[7] = 300.0;
+        assert!(p.validate().unwrap_err().to_string().contains("zernike_um[7]"));
+        let e = VisionProfile::from_json(r#"{"pupil_diameter_mm": 6, "zernike_um": [], "colour": 1}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("colour"), "{e}");
+    }
+
+    #[test]
+    fn prescription_adds_defocus_to_the_effective_wavefront() {
+        let mut p = VisionProfile::perfect();
+        p.prescription = Some(Prescription {
+            sphere_d: -2.0,
+            cylinder_d: 0.0,
+            axis_deg: 0.0,
+        });
+        let w = p.effective_wavefront().unwrap();
+        // −2.00 D at 6 mm: C(2,0) = −M·r²/(4√3) = 2·9/(4√3) = 2.598 µm.
+        assert!((w.get(4) - 2.598).abs() < 1e-3, "{}", w.get(4));
+    }
+}

@@ -1,0 +1,84 @@
+//! Where a viewer is and how a transport build samples: the retinal grid, the eye position, the build options.
+
+use crate::physics::display::DisplayGeometry;
+
+#[allow(unused_imports)]
+use super::*;
+
+/// The grid on which retinal images are sampled, in display-plane coordinates (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RetinalGrid {
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// Pixel pitch, mm (display plane).
+    pub pixel_mm: f64,
+    /// Centre of pixel (0, 0), mm.
+    pub origin_mm: [f64; 2],
+}
+
+impl RetinalGrid {
+    /// A grid covering the barrier with `oversample` pixels per hole pitch; with 1, pixel centres are the
+    /// hole centres.
+    pub fn for_display(display: &DisplayGeometry, oversample: u32) -> Self {
+        let k = oversample.max(1);
+        let pixel_mm = display.hole_pitch_mm / k as f64;
+        let width = display.holes_x * k;
+        let height = display.holes_y * k;
+        Self {
+            width,
+            height,
+            pixel_mm,
+            origin_mm: [
+                -(width as f64 - 1.0) / 2.0 * pixel_mm,
+                -(height as f64 - 1.0) / 2.0 * pixel_mm,
+            ],
+        }
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+
+    /// True for an empty grid.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Where the viewer's pupil centre is, relative to the barrier's centre.
+#[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct EyePosition {
+    /// Lateral offset, mm.
+    pub x_mm: f64,
+    /// Vertical offset, mm.
+    pub y_mm: f64,
+    /// Change of viewing distance from the display's design distance, mm (positive = farther).
+    pub dz_mm: f64,
+}
+
+/// Options of a transport build.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransportOptions {
+    /// Sub-rays per light-field sample (S).
+    pub sub_rays: u32,
+    /// Seed of the sub-ray jitter.
+    pub seed: u64,
+    /// Retinal pixels per hole pitch.
+    pub retina_oversample: u32,
+    /// OSA indices j whose ∂T/∂W_j is built alongside T (empty: none).
+    pub derivative_terms: Vec<usize>,
+}
+
+impl Default for TransportOptions {
+    fn default() -> Self {
+        Self {
+            sub_rays: 16,
+            seed: 7,
+            retina_oversample: 1,
+            derivative_terms: Vec::new(),
+        }
+    }
+}

@@ -1,0 +1,255 @@
+//! The ray tracer that builds T and ∂T/∂W (paper Eqs. 9–11).
+
+use crate::physics::display::DisplayGeometry;
+use crate::physics::zernike::{ZernikeCoefficients, ZernikePolynomial};
+use rayon::prelude::*;
+
+use super::rng::SplitMix64;
+#[allow(unused_imports)]
+use super::*;
+
+/// One sub-ray's landing point before splatting.
+pub(crate) struct Landing {
+    col: u32,
+    /// Landing point in retinal-grid pixel units.
+    f: [f64; 2],
+}
+
+/// One bilinear splat: a (landing, corner) pair keyed by (column, row).
+pub(crate) struct Splat {
+    key: u64,
+    w: f32,
+    landing: u32,
+    corner: u8,
+}
+
+/// Bilinear weight of `corner` (bit 0: +x, bit 1: +y) for a point at `f` (pixel units), and its gradient
+/// with respect to f.
+pub(crate) fn bilinear(f: [f64; 2], corner: u8) -> (f64, [f64; 2]) {
+    let (tx, ty) = (f[0] - f[0].floor(), f[1] - f[1].floor());
+    let (wx, dwx) = if corner & 1 == 0 { (1.0 - tx, -1.0) } else { (tx, 1.0) };
+    let (wy, dwy) = if corner & 2 == 0 { (1.0 - ty, -1.0) } else { (ty, 1.0) };
+    (wx * wy, [dwx * wy, wx * dwy])
+}
+
+impl TransportMatrix {
+    /// Builds T for one observer (wavefront `wavefront`, at `eye`) looking at `display`.
+    ///
+    /// `wavefront` must already be at the viewing pupil (see `VisionProfile::effective_wavefront`).
+    pub fn build(
+        display: &DisplayGeometry,
+        wavefront: &ZernikeCoefficients,
+        eye: EyePosition,
+        options: &TransportOptions,
+    ) -> Result<Self, TransportError> {
+        if options.sub_rays == 0 || options.sub_rays > 1024 {
+            return Err(TransportError::Invalid {
+                field: "sub_rays",
+                reason: format!("must be within 1..=1024, got {}", options.sub_rays),
+            });
+        }
+        if options.retina_oversample == 0 || options.retina_oversample > 8 {
+            return Err(TransportError::Invalid {
+                field: "retina_oversample",
+                reason: format!("must be within 1..=8, got {}", options.retina_oversample),
+            });
+        }
+        let d_eye = display.viewing_distance_mm + eye.dz_mm;
+        if !(d_eye.is_finite() && d_eye > 10.0) {
+            return Err(TransportError::Invalid {
+                field: "eye.dz_mm",
+                reason: format!("the eye would be {d_eye} mm from the barrier"),
+            });
+        }
+        let grid = RetinalGrid::for_display(display, options.retina_oversample);
+        let r_p = wavefront.pupil_radius_mm();
+        let poly = wavefront.polynomial();
+        let term_polys: Vec<ZernikePolynomial> = options
+            .derivative_terms
+            .iter()
+            .map(|&j| ZernikePolynomial::single_term(j))
+            .collect();
+        // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
+        let shift_per_grad = d_eye * 1e-3 / grid.pixel_mm / r_p;
+        let n_holes = (display.holes_x * display.holes_y) as usize;
+        let views = (display.views_u * display.views_v) as usize;
+        let s = options.sub_rays as usize;
+
+        // Trace and splat hole by hole in parallel; each hole's entries are merged per column.
+        struct HoleOut {
+            /// (column, row, weight, dweights...) sorted by column then row.
+            cols: Vec<u32>,
+            rows: Vec<u32>,
+            w: Vec<f32>,
+            dw: Vec<f32>,
+            traced: u64,
+            in_pupil: u64,
+            off_grid: u64,
+        }
+        let n_terms = term_polys.len();
+        let holes: Vec<HoleOut> = (0..n_holes)
+            .into_par_iter()
+            .map(|h| {
+                let (hx, hy) = ((h as u32) % display.holes_x, (h as u32) / display.holes_x);
+                let centre = display.hole_centre_mm(hx, hy);
+                let mut rng = SplitMix64(options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
+                // ∂f/∂W_j per landing, flat: landing index × n_terms.
+                let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * n_terms);
+                let mut traced = 0u64;
+                for j in 0..display.views_v {
+                    for i in 0..display.views_u {
+                        let q0 = display.screen_pixel_centre_mm(hx, hy, i, j);
+                        let col = display.sample_index(hx, hy, i, j) as u32;
+                        for _ in 0..s {
+                            traced += 1;
+                            // Uniform point in the hole's disc and in the screen pixel's square.
+                            let rho = 0.5 * display.hole_diameter_mm * rng.next_f64().sqrt();
+                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                            let sx = centre[0] + rho * cos;
+                            let sy = centre[1] + rho * sin;
+                            let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            // Slope (u, v) = (s − q)/g; the ray meets the pupil plane at P = s + d·(u, v).
+                            let px = sx + d_eye * (sx - qx) / display.gap_mm - eye.x_mm;
+                            let py = sy + d_eye * (sy - qy) / display.gap_mm - eye.y_mm;
+                            let (ux, uy) = (px / r_p, py / r_p);
+                            if ux * ux + uy * uy > 1.0 {
+                                continue; // stopped by the iris
+                            }
+                            let g = poly.gradient(ux, uy);
+                            let f = [
+                                (sx - grid.origin_mm[0]) / grid.pixel_mm + shift_per_grad * g[0],
+                                (sy - grid.origin_mm[1]) / grid.pixel_mm + shift_per_grad * g[1],
+                            ];
+                            for tp in &term_polys {
+                                let gk = tp.gradient(ux, uy);
+                                dfs.push([shift_per_grad * gk[0], shift_per_grad * gk[1]]);
+                            }
+                            landings.push(Landing { col, f });
+                        }
+                    }
+                }
+                let in_pupil = landings.len() as u64;
+                // Each hole's light, spread over k² retinal pixels per hole pitch, keeps its intensity.
+                let k2 = (options.retina_oversample * options.retina_oversample) as f64;
+                let weight = if in_pupil > 0 { k2 / in_pupil as f64 } else { 0.0 };
+                // Bilinear splat: one entry per (landing, corner), keyed by (column, row).
+                let mut entries: Vec<Splat> = Vec::with_capacity(landings.len() * 4);
+                let mut off_grid = 0u64;
+                for (li, l) in landings.iter().enumerate() {
+                    let (x0, y0) = (l.f[0].floor(), l.f[1].floor());
+                    let mut any = false;
+                    for corner in 0..4u8 {
+                        let (gx, gy) = (x0 as i64 + (corner & 1) as i64, y0 as i64 + (corner >> 1) as i64);
+                        if gx < 0 || gy < 0 || gx >= grid.width as i64 || gy >= grid.height as i64 {
+                            continue;
+                        }
+                        any = true;
+                        let row = (gy as u32) * grid.width + gx as u32;
+                        let (w, _) = bilinear(l.f, corner);
+                        entries.push(Splat {
+                            key: (u64::from(l.col) << 32) | u64::from(row),
+                            w: (weight * w) as f32,
+                            landing: li as u32,
+                            corner,
+                        });
+                    }
+                    if !any {
+                        off_grid += 1;
+                    }
+                }
+                entries.sort_unstable_by_key(|e| e.key);
+                let mut out = HoleOut {
+                    cols: Vec::with_capacity(entries.len()),
+                    rows: Vec::with_capacity(entries.len()),
+                    w: Vec::with_capacity(entries.len()),
+                    dw: Vec::with_capacity(entries.len() * n_terms),
+                    traced,
+                    in_pupil,
+                    off_grid,
+                };
+                let mut last_key = u64::MAX;
+                for e in entries {
+                    if e.key != last_key {
+                        out.cols.push((e.key >> 32) as u32);
+                        out.rows.push(e.key as u32);
+                        out.w.push(0.0);
+                        out.dw.extend(std::iter::repeat_n(0.0, n_terms));
+                        last_key = e.key;
+                    }
+                    *out.w.last_mut().expect("an entry was pushed") += e.w;
+                    if n_terms > 0 {
+                        // ∂(wx·wy)/∂W_j = ∂wx/∂fx·wy·∂fx/∂W_j + wx·∂wy/∂fy·∂fy/∂W_j.
+                        let l = &landings[e.landing as usize];
+                        let (_, dwdf) = bilinear(l.f, e.corner);
+                        let base = out.dw.len() - n_terms;
+                        let df = &dfs[e.landing as usize * n_terms..(e.landing as usize + 1) * n_terms];
+                        for (k, d) in df.iter().enumerate() {
+                            out.dw[base + k] += (weight * (dwdf[0] * d[0] + dwdf[1] * d[1])) as f32;
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+
+        // Assemble Tᵀ (rows = light-field samples) from the per-hole lists.
+        let n_cols = display.n_samples_per_band();
+        let nnz: usize = holes.iter().map(|h| h.cols.len()).sum();
+        if nnz >= u32::MAX as usize {
+            return Err(TransportError::TooLarge(nnz));
+        }
+        let mut counts = vec![0u32; n_cols + 1];
+        for h in &holes {
+            for &c in &h.cols {
+                counts[c as usize + 1] += 1;
+            }
+        }
+        for i in 0..n_cols {
+            counts[i + 1] += counts[i];
+        }
+        let mut t_indices = vec![0u32; nnz];
+        let mut t_values = vec![0f32; nnz];
+        let mut t_dvalues: Vec<Vec<f32>> = vec![vec![0f32; nnz]; n_terms];
+        let mut next = counts.clone();
+        let mut stats = TransportStats::default();
+        for h in &holes {
+            stats.sub_rays_traced += h.traced;
+            stats.sub_rays_in_pupil += h.in_pupil;
+            stats.sub_rays_off_grid += h.off_grid;
+            stats.holes_seen += u64::from(h.in_pupil > 0);
+            for e in 0..h.cols.len() {
+                let c = h.cols[e] as usize;
+                let dst = next[c] as usize;
+                next[c] += 1;
+                t_indices[dst] = h.rows[e];
+                t_values[dst] = h.w[e];
+                for (k, dv) in t_dvalues.iter_mut().enumerate() {
+                    dv[dst] = h.dw[e * n_terms + k];
+                }
+            }
+        }
+        let adjoint = CsrMatrix {
+            n_rows: n_cols,
+            n_cols: grid.len(),
+            indptr: counts,
+            indices: t_indices,
+            values: t_values,
+        };
+        let (forward, map) = adjoint.transpose_with_map();
+        let derivative_forward = t_dvalues
+            .iter()
+            .map(|dv| map.iter().map(|&m| dv[m as usize]).collect())
+            .collect();
+        Ok(Self {
+            grid,
+            forward,
+            adjoint,
+            derivative_terms: options.derivative_terms.clone(),
+            derivative_forward,
+            derivative_adjoint: t_dvalues,
+            stats,
+        })
+    }
+}

@@ -1,0 +1,767 @@
+//! The `eyekey` command line: the same pipeline as the service, offline, on files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+
+use eyekey_core::imaging;
+use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
+use eyekey_core::physics::profile::VisionProfile;
+use eyekey_core::physics::transport::{EyePosition, TransportOptions};
+use eyekey_core::physics::zernike::{Prescription, ZernikeCoefficients};
+
+/// eyekey: show a document on a light-field display so that only one enrolled person can read it.
+#[derive(Parser, Debug)]
+#[command(name = "eyekey", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Print example JSON to start from.
+    #[command(subcommand)]
+    Example(ExampleCommand),
+    /// Render what a person sees of an image shown plainly on the display, or of a frame bundle.
+    Simulate(SimulateArgs),
+    /// Encode a document into a frame bundle that only the target can read.
+    Encode(EncodeArgs),
+    /// Measure who can read a frame bundle: target, observers, a sampled population, a camera.
+    Evaluate(EvaluateArgs),
+    /// Benchmarks: transport build, sparse kernels, solver, whole encode; figures go to a Markdown file.
+    Bench(BenchArgs),
+    /// Experiments: the paper's §7.3, a design-space sweep, the secure preset's evaluation.
+    #[command(subcommand)]
+    Experiment(ExperimentCommand),
+    /// Run the REST service (embedded SQLite, durable job queue, frame bundles for registered displays).
+    Serve(crate::service::ServeArgs),
+    /// Run a display client: fetch this display's newest frame bundle, verify it and install it into
+    /// `<out>/current/`, once or following the server's events.
+    DisplayClient(crate::client::DisplayClientArgs),
+}
+
+/// `eyekey experiment ...`
+#[derive(Subcommand, Debug)]
+pub enum ExperimentCommand {
+    /// Paper §7.3: Fig. 13 baseline, Fig. 14 multiplex and Fig. 15 difference maximisation, with both ablations.
+    Paper {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/paper")]
+        out: PathBuf,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 300)]
+        max_iterations: u32,
+        /// People sampled to check the proposed multiplex encoding (0 skips).
+        #[arg(long, default_value_t = 50)]
+        population: u32,
+    },
+    /// Design-space sweep: target legibility against the fraction of a sampled population that can read.
+    Sweep {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/sweep")]
+        out: PathBuf,
+        /// People sampled per configuration.
+        #[arg(long, default_value_t = 60)]
+        population: u32,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 200)]
+        max_iterations: u32,
+    },
+    /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
+    Secure {
+        /// Output directory (bundle/ and evaluation/).
+        #[arg(long, default_value = "docs/experiments/secure")]
+        out: PathBuf,
+        /// People sampled.
+        #[arg(long, default_value_t = 1000)]
+        population: u32,
+    },
+    /// Simulated views with known text and their legibility, for calibrating the threshold against OCR
+    /// (`benches/calibrate_ocr.sh`).
+    Calibrate {
+        /// Output directory (view_<k>.png and views.csv).
+        #[arg(long, default_value = "target/calibration")]
+        out: PathBuf,
+        /// Number of views.
+        #[arg(long, default_value_t = 400)]
+        count: usize,
+        /// Seed of the PINs, people and encodings.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+/// Options of `eyekey bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Display preset to benchmark.
+    #[arg(long, default_value = "paper")]
+    pub preset: String,
+    /// Sub-rays per light-field sample.
+    #[arg(long, default_value_t = 16)]
+    pub sub_rays: u32,
+    /// Which benchmark: transport, solver, encode or all.
+    #[arg(long, default_value = "all")]
+    pub section: String,
+    /// Markdown file whose `<!-- bench:… -->` sections are replaced with the new figures.
+    #[arg(long, default_value = "BENCHMARKS.md")]
+    pub out: PathBuf,
+    /// Also export the 2-observer solver problem (Matrix Market) into this directory for an external solver.
+    #[arg(long)]
+    pub export: Option<PathBuf>,
+}
+
+/// Options of `eyekey encode`.
+#[derive(Args, Debug)]
+pub struct EncodeArgs {
+    /// Display description (JSON).
+    #[arg(long)]
+    pub display: PathBuf,
+    /// The target's vision profile (JSON).
+    #[arg(long)]
+    pub target: PathBuf,
+    /// A representative observer's profile, shown the decoy (repeatable).
+    #[arg(long)]
+    pub observer: Vec<PathBuf>,
+    /// A decoy image for the observers (implies --decoy-kind image).
+    #[arg(long)]
+    pub decoy: Option<PathBuf>,
+    /// What decoy observers see: noise, grey or image.
+    #[arg(long, value_enum)]
+    pub decoy_kind: Option<DecoyArg>,
+    /// Decoy observers sampled from the population.
+    #[arg(long)]
+    pub population_decoys: Option<u32>,
+    /// Weight of each decoy observer relative to the target.
+    #[arg(long)]
+    pub decoy_weight: Option<f64>,
+    /// Seed for sampling and jitter.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The document (PNG or JPEG).
+    #[arg(long)]
+    pub document: PathBuf,
+    /// Encoder.
+    #[arg(long, value_enum, default_value = "multiplex")]
+    pub method: MethodArg,
+    /// Ablation: optical or spectral.
+    #[arg(long, value_enum)]
+    pub ablation: Option<AblationArg>,
+    /// Solver iteration cap.
+    #[arg(long)]
+    pub max_iterations: Option<u32>,
+    /// Solver relative tolerance.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Sub-rays per light-field sample.
+    #[arg(long)]
+    pub sub_rays: Option<u32>,
+    /// λ_W of Eq. 16.
+    #[arg(long)]
+    pub lambda_w: Option<f64>,
+    /// λ_c of Eq. 16.
+    #[arg(long)]
+    pub lambda_c: Option<f64>,
+    /// Also make the target read from eye positions this far off axis, mm (head movement).
+    #[arg(long)]
+    pub head_radius: Option<f64>,
+    /// Adaptive decoy rounds: add sampled people who can still read as decoys and solve again.
+    #[arg(long)]
+    pub adaptive_rounds: Option<u32>,
+    /// Add camera decoys: an ideal lens behind a one-band filter, shown noise.
+    #[arg(long)]
+    pub camera_decoys: bool,
+    /// Output bundle directory (must not exist).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Encoder names on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum MethodArg {
+    /// Eq. 14 with K observers.
+    Multiplex,
+    /// Eq. 16.
+    Diffmax,
+    /// Both.
+    Combined,
+}
+
+/// Ablations on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum AblationArg {
+    /// Optical key only.
+    Optical,
+    /// Spectral key only.
+    Spectral,
+}
+
+/// Decoy kinds on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum DecoyArg {
+    /// Random high-contrast mask.
+    Noise,
+    /// Mid grey.
+    Grey,
+    /// The --decoy image.
+    Image,
+}
+
+/// Options of `eyekey evaluate`.
+#[derive(Args, Debug)]
+pub struct EvaluateArgs {
+    /// Frame bundle directory or zip.
+    #[arg(long)]
+    pub bundle: PathBuf,
+    /// The target's vision profile.
+    #[arg(long)]
+    pub target: PathBuf,
+    /// The document the bundle encodes.
+    #[arg(long)]
+    pub document: PathBuf,
+    /// Further observers to score (repeatable).
+    #[arg(long)]
+    pub observer: Vec<PathBuf>,
+    /// People sampled from the population statistics.
+    #[arg(long, default_value_t = 50)]
+    pub population: u32,
+    /// Seed of the population sample.
+    #[arg(long, default_value_t = 20_000)]
+    pub seed: u64,
+    /// Legibility threshold.
+    #[arg(long, default_value_t = eyekey_core::evaluation::DEFAULT_THRESHOLD)]
+    pub threshold: f64,
+    /// Output directory (report.json, views/).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `eyekey example ...`
+#[derive(Subcommand, Debug)]
+pub enum ExampleCommand {
+    /// A display description.
+    Display {
+        /// Preset: paper, secure or small.
+        #[arg(long, default_value = "paper")]
+        preset: String,
+    },
+    /// A vision profile (no options: a perfect eye, standard observer, 6 mm pupil).
+    Profile(ExampleProfileArgs),
+    /// A test document: lines of text, black on white, as a PNG.
+    Document {
+        /// A line of text (repeat for more lines); digits, letters and : - . , #.
+        #[arg(long, default_value = "PIN 4821")]
+        text: Vec<String>,
+        /// Width in pixels.
+        #[arg(long, default_value_t = 200)]
+        width: u32,
+        /// Height in pixels.
+        #[arg(long, default_value_t = 200)]
+        height: u32,
+        /// Pixels per font dot.
+        #[arg(long, default_value_t = 4)]
+        scale: u32,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Options of `eyekey example profile`.
+#[derive(Args, Debug)]
+pub struct ExampleProfileArgs {
+    /// Spherical refractive error, dioptres.
+    #[arg(long, allow_hyphen_values = true)]
+    pub sphere: Option<f64>,
+    /// Cylinder, dioptres.
+    #[arg(long, allow_hyphen_values = true, requires = "axis")]
+    pub cylinder: Option<f64>,
+    /// Cylinder axis, degrees.
+    #[arg(long)]
+    pub axis: Option<f64>,
+    /// Pupil diameter, mm.
+    #[arg(long, default_value_t = 6.0)]
+    pub pupil: f64,
+    /// Print a person sampled from the population statistics with this seed instead.
+    #[arg(long, conflicts_with_all = ["sphere", "cylinder", "axis"])]
+    pub population_seed: Option<u64>,
+}
+
+/// Options of `eyekey simulate`.
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Display description (JSON).
+    #[arg(long)]
+    pub display: PathBuf,
+    /// The viewer's vision profile (JSON).
+    #[arg(long)]
+    pub profile: PathBuf,
+    /// An image shown plainly (every view of a hole equal).
+    #[arg(long, conflicts_with = "frames", required_unless_present = "frames")]
+    pub image: Option<PathBuf>,
+    /// A frame bundle directory (or .zip) written by `eyekey encode` or downloaded from the service.
+    #[arg(long)]
+    pub frames: Option<PathBuf>,
+    /// Output PNG (sRGB).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Lateral eye offset, mm.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub eye_x: f64,
+    /// Vertical eye offset, mm.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub eye_y: f64,
+    /// Sub-rays per light-field sample.
+    #[arg(long, default_value_t = 16)]
+    pub sub_rays: u32,
+    /// Retinal pixels per hole pitch.
+    #[arg(long, default_value_t = 2)]
+    pub oversample: u32,
+}
+
+/// Reads and validates a display description.
+pub fn read_display(path: &Path) -> Result<DisplayGeometry> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read display {}", path.display()))?;
+    let d: DisplayGeometry =
+        serde_json::from_str(&text).with_context(|| format!("display {}: malformed JSON", path.display()))?;
+    d.validate().with_context(|| format!("display {}", path.display()))?;
+    Ok(d)
+}
+
+/// Reads and validates a vision profile.
+pub fn read_profile(path: &Path) -> Result<VisionProfile> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read profile {}", path.display()))?;
+    VisionProfile::from_json(&text).with_context(|| format!("profile {}", path.display()))
+}
+
+/// Runs the command line; errors are reported by `main` on one line.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Example(ExampleCommand::Display { preset }) => {
+            let d = DisplayGeometry::preset(&preset)?;
+            print_stdout(&serde_json::to_string_pretty(&d)?)?;
+        }
+        Command::Example(ExampleCommand::Profile(a)) => {
+            print_stdout(&serde_json::to_string_pretty(&example_profile(&a)?)?)?;
+        }
+        Command::Example(ExampleCommand::Document {
+            text,
+            width,
+            height,
+            scale,
+            out,
+        }) => {
+            if !(8..=4096).contains(&width) || !(8..=4096).contains(&height) {
+                bail!("--width and --height must be within 8..=4096 pixels");
+            }
+            let lines: Vec<&str> = text.iter().map(String::as_str).collect();
+            imaging::save_rgb_png(
+                &eyekey_core::imaging::glyphs::render_text(&lines, width, height, scale),
+                &out,
+            )?;
+        }
+        Command::Simulate(a) => simulate(&a)?,
+        Command::Encode(a) => encode(&a)?,
+        Command::Evaluate(a) => evaluate(&a)?,
+        Command::Bench(a) => bench(&a)?,
+        Command::Serve(args) => {
+            init_tracing();
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(crate::service::serve(args))?;
+        }
+        Command::DisplayClient(args) => {
+            init_tracing();
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(crate::client::run(args))?;
+        }
+        Command::Experiment(ExperimentCommand::Paper {
+            out,
+            max_iterations,
+            population,
+        }) => {
+            print!(
+                "{}",
+                crate::research::experiment::paper(&out, max_iterations, population)?
+            );
+        }
+        Command::Experiment(ExperimentCommand::Sweep {
+            out,
+            population,
+            max_iterations,
+        }) => {
+            print!(
+                "{}",
+                crate::research::experiment::sweep(&out, population, max_iterations)?.0
+            );
+        }
+        Command::Experiment(ExperimentCommand::Secure { out, population }) => {
+            print!("{}", crate::research::experiment::secure(&out, population)?);
+        }
+        Command::Experiment(ExperimentCommand::Calibrate { out, count, seed }) => {
+            crate::research::calibration::calibration_views(&out, count, seed)?;
+            println!("wrote {count} views and views.csv to {}", out.display());
+        }
+    }
+    Ok(())
+}
+
+fn example_profile(a: &ExampleProfileArgs) -> Result<VisionProfile> {
+    if !(2.0..=9.0).contains(&a.pupil) {
+        bail!("--pupil must be within 2..=9 mm, got {}", a.pupil);
+    }
+    if let Some(seed) = a.population_seed {
+        let p = eyekey_core::physics::population::sample_population(1, seed, Default::default()).remove(0);
+        p.validate()?;
+        return Ok(p);
+    }
+    let mut p = VisionProfile {
+        pupil_diameter_mm: a.pupil,
+        ..VisionProfile::perfect()
+    };
+    if a.sphere.is_some() || a.cylinder.is_some() {
+        let rx = Prescription {
+            sphere_d: a.sphere.unwrap_or(0.0),
+            cylinder_d: a.cylinder.unwrap_or(0.0),
+            axis_deg: a.axis.unwrap_or(0.0),
+        };
+        rx.validate()?;
+        // The refractive error goes into the Zernike terms directly, as an aberrometer would report it.
+        let z = ZernikeCoefficients::from_prescription(&rx, a.pupil);
+        for j in 3..=5 {
+            p.zernike_um[j] = z.get(j);
+        }
+    }
+    p.validate()?;
+    Ok(p)
+}
+
+fn simulate(a: &SimulateArgs) -> Result<()> {
+    let display = read_display(&a.display)?;
+    let profile = read_profile(&a.profile)?;
+    let options = TransportOptions {
+        sub_rays: a.sub_rays,
+        retina_oversample: a.oversample,
+        ..Default::default()
+    };
+    let eye = EyePosition {
+        x_mm: a.eye_x,
+        y_mm: a.eye_y,
+        dz_mm: 0.0,
+    };
+    let observer = Observer::new(&display, &profile, eye, &options)?;
+    let l = match (&a.image, &a.frames) {
+        (Some(img), _) => plain_light_field_for_image(&display, &imaging::load_image(img)?),
+        (None, Some(bundle)) => {
+            let (manifest, l) = eyekey_core::bundle::read_bundle(bundle)?;
+            if manifest.display != display {
+                bail!(
+                    "bundle {} was made for a different display than {} (holes {}×{}, views {}×{} vs {}×{}, {}×{})",
+                    bundle.display(),
+                    a.display.display(),
+                    manifest.display.holes_x,
+                    manifest.display.holes_y,
+                    manifest.display.views_u,
+                    manifest.display.views_v,
+                    display.holes_x,
+                    display.holes_y,
+                    display.views_u,
+                    display.views_v
+                );
+            }
+            l
+        }
+        (None, None) => bail!("give --image or --frames"),
+    };
+    let view = observer.view(&l);
+    imaging::save_rgb_png(&observer.picture(&view), &a.out)?;
+    eprintln!(
+        "wrote {} ({}×{} retinal pixels; {:.1} % of traced rays entered the pupil)",
+        a.out.display(),
+        observer.transport.grid.width,
+        observer.transport.grid.height,
+        100.0 * observer.transport.stats.sub_rays_in_pupil as f64 / observer.transport.stats.sub_rays_traced as f64
+    );
+    Ok(())
+}
+
+/// A progress bar on a terminal, nothing otherwise.
+fn progress_bar(label: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(1000);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {percent:>3}% {elapsed_precise}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_message(label.to_string());
+    bar
+}
+
+fn encode(a: &EncodeArgs) -> Result<()> {
+    use eyekey_core::encoding::pipeline::{Ablation, DecoyKind, EncodeOptions, JobSpec, Method};
+    if a.out.exists() {
+        bail!("--out {} already exists; choose a new directory", a.out.display());
+    }
+    let display = read_display(&a.display)?;
+    let target = read_profile(&a.target)?;
+    let observers = a.observer.iter().map(|p| read_profile(p)).collect::<Result<Vec<_>>>()?;
+    let document = imaging::load_image(&a.document)?;
+    let decoy = a.decoy.as_deref().map(imaging::load_image).transpose()?;
+    let d = EncodeOptions::default();
+    let options = EncodeOptions {
+        method: match a.method {
+            MethodArg::Multiplex => Method::Multiplex,
+            MethodArg::Diffmax => Method::Diffmax,
+            MethodArg::Combined => Method::Combined,
+        },
+        ablation: a.ablation.map(|x| match x {
+            AblationArg::Optical => Ablation::Optical,
+            AblationArg::Spectral => Ablation::Spectral,
+        }),
+        population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
+        decoy: match (a.decoy_kind, &decoy) {
+            (Some(DecoyArg::Noise), _) => DecoyKind::Noise,
+            (Some(DecoyArg::Grey), _) => DecoyKind::Grey,
+            (Some(DecoyArg::Image), _) | (None, Some(_)) => DecoyKind::Image,
+            (None, None) => d.decoy,
+        },
+        decoy_weight: a.decoy_weight.unwrap_or(d.decoy_weight),
+        seed: a.seed.unwrap_or(d.seed),
+        sub_rays: a.sub_rays.unwrap_or(d.sub_rays),
+        max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
+        tolerance: a.tolerance.unwrap_or(d.tolerance),
+        lambda_w: a.lambda_w.unwrap_or(d.lambda_w),
+        lambda_c: a.lambda_c.unwrap_or(d.lambda_c),
+        evaluation_population: 0,
+        head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
+        adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
+        camera_decoys: a.camera_decoys || d.camera_decoys,
+        ..d.clone()
+    };
+    if options.decoy == DecoyKind::Image && decoy.is_none() {
+        bail!("--decoy-kind image needs --decoy IMAGE");
+    }
+    let spec = JobSpec {
+        display,
+        target,
+        target_label: a.target.display().to_string(),
+        observers,
+        document,
+        decoy,
+        options,
+    };
+    let bar = progress_bar("encoding");
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let started = std::time::Instant::now();
+    let encoded = eyekey_core::encoding::pipeline::encode(&spec, &|p| bar.set_position((p * 1000.0) as u64), &cancel)?;
+    eyekey_core::encoding::pipeline::write_outputs(&spec, &encoded, &a.out, false, &|_| {}, &cancel)?;
+    bar.finish_and_clear();
+    eprintln!(
+        "wrote {} in {:.1} s (solver: {} iterations, {})",
+        a.out.display(),
+        started.elapsed().as_secs_f64(),
+        encoded.solver["iterations"],
+        encoded.solver["termination"]
+    );
+    Ok(())
+}
+
+fn evaluate(a: &EvaluateArgs) -> Result<()> {
+    use eyekey_core::evaluation::EvaluationOptions;
+    let (manifest, l) = eyekey_core::bundle::read_bundle(&a.bundle)?;
+    let target = read_profile(&a.target)?;
+    let document = imaging::load_image(&a.document)?;
+    let observers = a
+        .observer
+        .iter()
+        .map(|p| Ok((p.display().to_string(), read_profile(p)?)))
+        .collect::<Result<Vec<_>>>()?;
+    if !(0.0..=1.0).contains(&a.threshold) {
+        bail!("--threshold must be within 0..=1, got {}", a.threshold);
+    }
+    if a.population > 2000 {
+        bail!("--population must be at most 2000, got {}", a.population);
+    }
+    let options = EvaluationOptions {
+        population: a.population,
+        seed: a.seed,
+        threshold: a.threshold,
+        ..Default::default()
+    };
+    let bar = progress_bar("evaluating");
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let ev = eyekey_core::evaluation::evaluate(
+        &manifest.display,
+        &l,
+        &document,
+        eyekey_core::encoding::pipeline::OBJECTIVE_LEVEL,
+        &target,
+        &observers,
+        &options,
+        &|p| bar.set_position((p * 1000.0) as u64),
+        &cancel,
+    )?;
+    bar.finish_and_clear();
+    eyekey_core::encoding::pipeline::write_evaluation(&ev, &a.out)?;
+    let r = &ev.report;
+    println!(
+        "target: legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}",
+        r.target.legibility, r.target.psnr_db, r.target.ssim
+    );
+    for o in &r.observers {
+        println!(
+            "{}: legibility {:.2}{}",
+            o.label,
+            o.legibility,
+            if o.readable { " (READS)" } else { "" }
+        );
+    }
+    if let Some(p) = &r.population {
+        println!(
+            "population: {}/{} can read (median legibility {:.2}, 95th percentile {:.2}, max {:.2})",
+            p.readable_count, p.count, p.median_legibility, p.p95_legibility, p.max_legibility
+        );
+    }
+    if let Some(c) = &r.camera {
+        println!(
+            "camera attacker best: {} legibility {:.2}",
+            c.best.label, c.best.legibility
+        );
+    }
+    if let Some(k) = &r.key_sensitivity {
+        println!(
+            "key: optical radius {:.3} µm ({:.1} bits), spectral radius {:.2} SD ({:.1} bits), empirical ≥ {:.1} bits",
+            k.optical_radius_um, k.optical_bits, k.spectral_radius_sd, k.spectral_bits, k.empirical_bits
+        );
+    }
+    println!("wrote {}", a.out.join("report.json").display());
+    Ok(())
+}
+
+fn bench(a: &BenchArgs) -> Result<()> {
+    use crate::research::bench::*;
+    let display = DisplayGeometry::preset(&a.preset)?;
+    let all = a.section == "all";
+    if !["all", "transport", "solver", "encode"].contains(&a.section.as_str()) {
+        bail!(
+            "--section must be transport, solver, encode or all, got {:?}",
+            a.section
+        );
+    }
+    let cmd = format!(
+        "eyekey bench --preset {} --sub-rays {} --section {}",
+        a.preset, a.sub_rays, a.section
+    );
+    let stamp = chrono::Utc::now().format("%Y-%m-%d %H:%M UTC");
+    if all || a.section == "transport" {
+        let body = format!(
+            "Measured {stamp} by `{cmd}` (release build):\n\n{}",
+            transport_bench(&display, a.sub_rays)?
+        );
+        print!("{body}");
+        write_section(&a.out, "transport", &body)?;
+    }
+    if all || a.section == "solver" {
+        let mut body = format!(
+            "Measured {stamp} by `{cmd}` (release build). Time and iterations to reach an objective within 1e-3 \
+             (relative) of the optimum found by a 1500-iteration, 1e-9-tolerance run from the same start.\n\n\
+             | problem | observers | unknowns | optimum f* | iterations to 1e-3 | time to 1e-3 | ms / iteration | peak memory |\n\
+             | --- | --- | --- | --- | --- | --- | --- | --- |\n"
+        );
+        for k in [2usize, 8] {
+            let problem = BenchProblem::new(&display, k, a.sub_rays)?;
+            if k == 2 {
+                if let Some(dir) = &a.export {
+                    problem.export(dir)?;
+                    let (row, f_star, secs) = solver_bench(&problem, &format!("{} multiplex", a.preset))?;
+                    body.push_str(&row);
+                    std::fs::write(
+                        dir.join("eyekey_result.json"),
+                        serde_json::to_string_pretty(&serde_json::json!({"f_star": f_star, "seconds_to_1e-3": secs}))?,
+                    )?;
+                    continue;
+                }
+            }
+            body.push_str(&solver_bench(&problem, &format!("{} multiplex", a.preset))?.0);
+        }
+        print!("{body}");
+        write_section(&a.out, "solver", &body)?;
+    }
+    if all || a.section == "encode" {
+        use eyekey_core::encoding::pipeline::{EncodeOptions, JobSpec};
+        eyekey_core::physics::transport::TransportCache::global().set_capacity_bytes(0);
+        let g = (display.holes_x * 4, display.holes_y * 4);
+        let spec = JobSpec {
+            display: display.clone(),
+            target: VisionProfile::perfect(),
+            target_label: "bench".into(),
+            observers: eyekey_core::physics::population::sample_population(1, 3, Default::default()),
+            document: eyekey_core::imaging::glyphs::render_text(&["PIN", "4821"], g.0, g.1, (g.0 / 32).max(1)),
+            decoy: None,
+            options: EncodeOptions {
+                population_decoys: 0,
+                sub_rays: a.sub_rays,
+                ..Default::default()
+            },
+        };
+        let dir = tempfile::tempdir()?;
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let t = std::time::Instant::now();
+        let encoded = eyekey_core::encoding::pipeline::encode(&spec, &|_| {}, &cancel)?;
+        let t_solve = t.elapsed().as_secs_f64();
+        eyekey_core::encoding::pipeline::write_outputs(
+            &spec,
+            &encoded,
+            &dir.path().join("bundle"),
+            false,
+            &|_| {},
+            &cancel,
+        )?;
+        let total = t.elapsed().as_secs_f64();
+        let body = format!(
+            "Measured {stamp} by `{cmd}` (release build, transport cache disabled: a cold start).\n\n\
+             | quantity | value |\n| --- | --- |\n\
+             | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
+             | of which transport + solve | {t_solve:.2} s ({} iterations, {}) |\n\
+             | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
+            encoded.solver["iterations"],
+            encoded.solver["termination"],
+            total - t_solve,
+            peak_memory_bytes() as f64 / 1e6
+        );
+        print!("{body}");
+        write_section(&a.out, "encode", &body)?;
+    }
+    Ok(())
+}
+
+/// Structured logs on stderr; `RUST_LOG` filters (default `info`), `EYEKEY_LOG_FORMAT=json` for JSON lines.
+fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = if std::env::var("EYEKEY_LOG_FORMAT").as_deref() == Ok("json") {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+}
+
+/// Prints a line on stdout; a reader that went away (`eyekey example display | head`) is not an error.
+fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|_| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
+}

@@ -1,0 +1,345 @@
+//! `eyekey bench`: figures for the transport operator, the sparse kernels and the solver, printed and written
+//! to a Markdown file. Not a test: nothing here asserts on time.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+
+use eyekey_core::encoding::objectives::{noise_decoy, MultiplexObjective, Term};
+use eyekey_core::encoding::solver::{minimise, Objective, SolverOptions};
+use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::observer::Observer;
+use eyekey_core::physics::profile::VisionProfile;
+use eyekey_core::physics::transport::{EyePosition, TransportMatrix, TransportOptions};
+
+/// Peak resident memory of this process so far, bytes (Linux `VmHWM`; 0 elsewhere).
+pub fn peak_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|kb| kb.parse::<u64>().ok())
+                    .map(|kb| kb * 1024)
+            })
+        })
+        .unwrap_or(0)
+}
+
+/// Streaming read bandwidth of this machine: a parallel sum over a 512 MiB f32 array, best of 5, GB/s.
+pub fn streaming_read_gbps() -> f64 {
+    let n = 128 << 20;
+    let data: Vec<f32> = (0..n).into_par_iter().map(|i| (i % 7) as f32).collect();
+    let mut best = f64::INFINITY;
+    let mut sink = 0.0f64;
+    for _ in 0..5 {
+        let t = Instant::now();
+        // Sixteen independent lanes per chunk so the sum vectorises and memory, not the adder, is the limit.
+        sink += data
+            .par_chunks(1 << 16)
+            .map(|c| {
+                let mut acc = [0f32; 16];
+                for block in c.chunks_exact(16) {
+                    for (a, v) in acc.iter_mut().zip(block) {
+                        *a += v;
+                    }
+                }
+                acc.iter().map(|v| *v as f64).sum::<f64>()
+            })
+            .sum::<f64>();
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(sink);
+    (n * 4) as f64 / best / 1e9
+}
+
+fn time_best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..reps {
+        let t = Instant::now();
+        f();
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    best
+}
+
+/// Runs the transport/kernel benchmark on a display; returns Markdown lines.
+pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<String> {
+    let mut out = String::new();
+    let bw = streaming_read_gbps();
+    let mut p = VisionProfile::perfect();
+    p.zernike_um[4] = 0.3;
+    p.zernike_um[7] = 0.15;
+    p.zernike_um[12] = 0.1;
+    let w = p.effective_wavefront()?;
+    let opts = TransportOptions {
+        sub_rays,
+        ..Default::default()
+    };
+    // Build (best of 3; the first run also pays page faults).
+    let mut t_matrix = None;
+    let build = time_best(3, || {
+        t_matrix = Some(TransportMatrix::build(display, &w, EyePosition::default(), &opts).expect("valid preset"))
+    });
+    let t = t_matrix.context("transport build")?;
+    let n = display.n_bands();
+    let coupling: Vec<[f32; 3]> = (0..n).map(|k| [0.3 + 0.1 * k as f32, 0.5, 0.2]).collect();
+    let l: Vec<f32> = (0..t.n_samples() * n).map(|i| (i % 13) as f32 / 13.0).collect();
+    let mut y = vec![0f32; t.n_pixels() * 3];
+    let mut x = vec![0f32; t.n_samples() * n];
+    let fwd = time_best(20, || t.forward_lms(&l, &coupling, &mut y));
+    let adj = time_best(20, || t.adjoint_lms(&y, &coupling, &mut x));
+    // Compulsory traffic: the matrix (indptr, indices, values) once, the input vector once, the output once.
+    let matrix_bytes = |m: &eyekey_core::physics::transport::CsrMatrix| (m.indptr.len() * 4 + m.nnz() * 8) as f64;
+    let fwd_bytes = matrix_bytes(&t.forward) + (l.len() * 4) as f64 + (y.len() * 4) as f64;
+    let adj_bytes = matrix_bytes(&t.adjoint) + (y.len() * 4) as f64 + (x.len() * 4) as f64;
+    let traced = t.stats.sub_rays_traced as f64;
+    writeln!(out, "| quantity | value |")?;
+    writeln!(out, "| --- | --- |")?;
+    writeln!(
+        out,
+        "| display | {}×{} holes, {}×{} views, {} bands ({} unknowns) |",
+        display.holes_x,
+        display.holes_y,
+        display.views_u,
+        display.views_v,
+        n,
+        t.n_samples() * n
+    )?;
+    writeln!(out, "| sub-rays per sample (S) | {sub_rays} |")?;
+    writeln!(out, "| rayon threads | {} |", rayon::current_num_threads())?;
+    writeln!(
+        out,
+        "| streaming read bandwidth (parallel sum, 512 MiB) | {bw:.2} GB/s |"
+    )?;
+    writeln!(out, "| T build time | {:.3} s |", build)?;
+    writeln!(out, "| sub-rays traced per second | {:.1} M/s |", traced / build / 1e6)?;
+    writeln!(
+        out,
+        "| sub-rays entering the pupil | {:.1} % |",
+        100.0 * t.stats.sub_rays_in_pupil as f64 / traced
+    )?;
+    writeln!(
+        out,
+        "| nnz(T) | {} ({:.1} MB for T and Tᵀ) |",
+        t.nnz(),
+        t.memory_bytes() as f64 / 1e6
+    )?;
+    writeln!(
+        out,
+        "| A·L (all {n} bands + coupling) | {:.2} ms, {:.2} GB/s effective = {:.0} % of streaming |",
+        fwd * 1e3,
+        fwd_bytes / fwd / 1e9,
+        100.0 * fwd_bytes / fwd / 1e9 / bw
+    )?;
+    writeln!(
+        out,
+        "| Aᵀ·y | {:.2} ms, {:.2} GB/s effective = {:.0} % of streaming |",
+        adj * 1e3,
+        adj_bytes / adj / 1e9,
+        100.0 * adj_bytes / adj / 1e9 / bw
+    )?;
+    writeln!(
+        out,
+        "| peak resident memory | {:.0} MB |",
+        peak_memory_bytes() as f64 / 1e6
+    )?;
+    Ok(out)
+}
+
+/// A multiplex problem on `display` with `k` observers (target + representative + population decoys).
+pub struct BenchProblem {
+    /// Observers (target first).
+    pub observers: Vec<Observer>,
+    /// Objective images.
+    pub objectives: Vec<Vec<f32>>,
+    /// ‖S'_t‖².
+    pub energy: f64,
+    /// Tikhonov μ (mean-square).
+    pub tikhonov: f64,
+}
+
+impl BenchProblem {
+    /// Builds the problem: the target reads a PIN slip, every other observer is shown a noise mask.
+    pub fn new(display: &DisplayGeometry, k: usize, sub_rays: u32) -> Result<Self> {
+        let opts = TransportOptions {
+            sub_rays,
+            ..Default::default()
+        };
+        let target = VisionProfile::perfect();
+        let mut people = vec![target];
+        people.extend(eyekey_core::physics::population::sample_population(
+            k.saturating_sub(1),
+            7,
+            Default::default(),
+        ));
+        let observers = people
+            .iter()
+            .map(|p| Observer::new(display, p, EyePosition::default(), &opts))
+            .collect::<Result<Vec<_>, _>>()?;
+        let g = observers[0].transport.grid;
+        let doc = eyekey_core::imaging::glyphs::render_text(
+            &["PIN", "4821"],
+            g.width * 4,
+            g.height * 4,
+            (g.width / 8).max(1),
+        );
+        let mut objectives = vec![observers[0].objective(&doc, eyekey_core::encoding::pipeline::OBJECTIVE_LEVEL)];
+        for (i, o) in observers.iter().enumerate().skip(1) {
+            objectives.push(o.objective(
+                &noise_decoy(g.width, g.height, 2, i as u64),
+                eyekey_core::encoding::pipeline::OBJECTIVE_LEVEL,
+            ));
+        }
+        let energy = objectives[0].iter().map(|v| (*v as f64).powi(2)).sum();
+        Ok(Self {
+            observers,
+            objectives,
+            energy,
+            tikhonov: 1e-4,
+        })
+    }
+
+    /// The objective over the problem.
+    pub fn objective(&self) -> MultiplexObjective<'_> {
+        let terms = self
+            .observers
+            .iter()
+            .zip(&self.objectives)
+            .map(|(o, obj)| Term {
+                observer: o,
+                objective: obj.clone(),
+                weight: 1.0,
+            })
+            .collect();
+        MultiplexObjective::new(terms, self.observers[0].coupling.len(), self.energy, self.tikhonov)
+    }
+
+    /// Writes the problem for an external solver: `A.mtx` (Matrix Market, the stacked, weighted and normalised
+    /// system √(w_k/E)·(C_k ⊗ T_k) with the light field's band-interleaved column order), `b.txt`, and
+    /// `problem.json` (sizes, bounds, μ).
+    pub fn export(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir)?;
+        let n = self.observers[0].coupling.len();
+        let cols = self.observers[0].transport.n_samples() * n;
+        let scale = (1.0 / self.energy).sqrt();
+        let mut entries: Vec<(usize, usize, f64)> = Vec::new();
+        let mut b: Vec<f64> = Vec::new();
+        let mut row0 = 0;
+        for (o, obj) in self.observers.iter().zip(&self.objectives) {
+            let m = &o.transport.forward;
+            for r in 0..m.n_rows {
+                for e in m.indptr[r] as usize..m.indptr[r + 1] as usize {
+                    let (c, v) = (m.indices[e] as usize, m.values[e] as f64);
+                    for (band, cn) in o.coupling_f64.iter().enumerate() {
+                        for (a, ca) in cn.iter().enumerate() {
+                            if *ca != 0.0 {
+                                entries.push((row0 + r * 3 + a, c * n + band, scale * v * ca));
+                            }
+                        }
+                    }
+                }
+            }
+            b.extend(obj.iter().map(|v| scale * *v as f64));
+            row0 += m.n_rows * 3;
+        }
+        let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("A.mtx"))?);
+        writeln!(f, "%%MatrixMarket matrix coordinate real general")?;
+        writeln!(f, "{} {} {}", row0, cols, entries.len())?;
+        for (r, c, v) in &entries {
+            writeln!(f, "{} {} {:e}", r + 1, c + 1, v)?;
+        }
+        f.flush()?;
+        let mut fb = std::io::BufWriter::new(std::fs::File::create(dir.join("b.txt"))?);
+        for v in &b {
+            writeln!(fb, "{v:e}")?;
+        }
+        fb.flush()?;
+        let meta = serde_json::json!({
+            "rows": row0, "cols": cols, "nnz": entries.len(), "lower": 0.0, "upper": 1.0,
+            "tikhonov_mean_square": self.tikhonov,
+            "objective": "||A x - b||^2 + mu * ||x||^2 / cols",
+            "x0": "0.5 everywhere",
+        });
+        std::fs::write(dir.join("problem.json"), serde_json::to_string_pretty(&meta)?)?;
+        Ok(())
+    }
+}
+
+/// Solver figures for one problem; returns Markdown lines and (f*, seconds to reach f*(1+1e-3)).
+pub fn solver_bench(problem: &BenchProblem, label: &str) -> Result<(String, f64, f64)> {
+    let obj = problem.objective();
+    let x0 = vec![0.5f32; obj.dim()];
+    let cancel = AtomicBool::new(false);
+    // Reference optimum: a long run with a tight tolerance.
+    let opts = SolverOptions {
+        max_iterations: 1500,
+        tolerance: 1e-9,
+        patience: 20,
+        ..Default::default()
+    };
+    let reference = minimise(&obj, x0.clone(), 0.0, 1.0, &opts, &mut |_| {}, &cancel);
+    let f_star = reference.objective;
+    // Timed run from the same start: record the wall time of every iteration and stop at f*(1 + 1e-3).
+    let start = Instant::now();
+    let mut times = Vec::new();
+    let stop = AtomicBool::new(false);
+    let mut record = |p: eyekey_core::encoding::solver::Progress| {
+        times.push((p.iteration, p.objective, start.elapsed().as_secs_f64()));
+        if p.objective <= f_star * (1.0 + 1e-3) {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    };
+    let run = minimise(&obj, x0, 0.0, 1.0, &opts, &mut record, &stop);
+    let hit = times
+        .iter()
+        .find(|(_, f, _)| *f <= f_star * (1.0 + 1e-3) + 1e-12)
+        .copied();
+    let (its, secs) = hit.map(|(i, _, t)| (i, t)).unwrap_or((run.iterations, run.seconds));
+    let per_it = match (times.first(), times.last()) {
+        (Some(a), Some(b)) if times.len() > 1 => (b.2 - a.2) / (times.len() - 1) as f64,
+        _ => run.seconds,
+    };
+    let mut out = String::new();
+    writeln!(
+        out,
+        "| {label} | {} | {} | {:.4e} | {} | {:.2} s | {:.1} ms | {:.0} MB |",
+        problem.observers.len(),
+        obj.dim(),
+        f_star,
+        its,
+        secs,
+        per_it * 1e3,
+        peak_memory_bytes() as f64 / 1e6
+    )?;
+    Ok((out, f_star, secs))
+}
+
+/// Replaces the section between `<!-- bench:NAME -->` and `<!-- /bench:NAME -->` in a Markdown file (appending
+/// the section if absent).
+pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
+    let start = format!("<!-- bench:{name} -->");
+    let end = format!("<!-- /bench:{name} -->");
+    let old = std::fs::read_to_string(path).unwrap_or_default();
+    let block = format!("{start}\n{body}{end}");
+    let new = match (old.find(&start), old.find(&end)) {
+        (Some(a), Some(b)) if b > a => format!("{}{}{}", &old[..a], block, &old[b + end.len()..]),
+        _ => format!(
+            "{}{}{}\n",
+            old,
+            if old.is_empty() || old.ends_with('\n') {
+                ""
+            } else {
+                "\n"
+            },
+            block
+        ),
+    };
+    std::fs::write(path, new).with_context(|| format!("writing {}", path.display()))
+}
