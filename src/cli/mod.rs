@@ -9,7 +9,7 @@ use eyekey_core::imaging;
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
 use eyekey_core::physics::profile::VisionProfile;
-use eyekey_core::physics::transport::{EyePosition, TransportOptions};
+use eyekey_core::physics::transport::{EyePosition, TransportCache, TransportOptions};
 use eyekey_core::physics::zernike::{Prescription, ZernikeCoefficients};
 
 /// eyekey: show a document on a light-field display so that only one enrolled person can read it.
@@ -453,7 +453,7 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
         y_mm: a.eye_y,
         dz_mm: 0.0,
     };
-    let observer = Observer::new(&display, &profile, eye, &options)?;
+    let observer = Observer::new(&display, &profile, eye, &options, &TransportCache::disabled())?;
     let l = match (&a.image, &a.frames) {
         (Some(img), _) => plain_light_field_for_image(&display, &imaging::load_image(img)?),
         (None, Some(bundle)) => {
@@ -560,15 +560,17 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     let bar = progress_bar("encoding");
     let cancel = std::sync::atomic::AtomicBool::new(false);
     let started = std::time::Instant::now();
-    let encoded = eyekey_core::encoding::pipeline::encode(&spec, &|p| bar.set_position((p * 1000.0) as u64), &cancel)?;
-    eyekey_core::encoding::pipeline::write_outputs(&spec, &encoded, &a.out, false, &|_| {}, &cancel)?;
+    let cache = TransportCache::default();
+    let encoded =
+        eyekey_core::encoding::pipeline::encode(&spec, &cache, &|p| bar.set_position((p * 1000.0) as u64), &cancel)?;
+    eyekey_core::encoding::pipeline::write_outputs(&spec, &encoded, &a.out, false, &cache, &|_| {}, &cancel)?;
     bar.finish_and_clear();
     eprintln!(
         "wrote {} in {:.1} s (solver: {} iterations, {})",
         a.out.display(),
         started.elapsed().as_secs_f64(),
-        encoded.solver["iterations"],
-        encoded.solver["termination"]
+        encoded.solver.iterations,
+        encoded.solver.termination
     );
     Ok(())
 }
@@ -605,6 +607,7 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         &target,
         &observers,
         &options,
+        &TransportCache::default(),
         &|p| bar.set_position((p * 1000.0) as u64),
         &cancel,
     )?;
@@ -696,7 +699,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
     }
     if all || a.section == "encode" {
         use eyekey_core::encoding::pipeline::{EncodeOptions, JobSpec};
-        eyekey_core::physics::transport::TransportCache::global().set_capacity_bytes(0);
+        let cache = TransportCache::disabled();
         let g = (display.holes_x * 4, display.holes_y * 4);
         let spec = JobSpec {
             display: display.clone(),
@@ -714,13 +717,14 @@ fn bench(a: &BenchArgs) -> Result<()> {
         let dir = tempfile::tempdir()?;
         let cancel = std::sync::atomic::AtomicBool::new(false);
         let t = std::time::Instant::now();
-        let encoded = eyekey_core::encoding::pipeline::encode(&spec, &|_| {}, &cancel)?;
+        let encoded = eyekey_core::encoding::pipeline::encode(&spec, &cache, &|_| {}, &cancel)?;
         let t_solve = t.elapsed().as_secs_f64();
         eyekey_core::encoding::pipeline::write_outputs(
             &spec,
             &encoded,
             &dir.path().join("bundle"),
             false,
+            &cache,
             &|_| {},
             &cancel,
         )?;
@@ -731,8 +735,8 @@ fn bench(a: &BenchArgs) -> Result<()> {
              | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
              | of which transport + solve | {t_solve:.2} s ({} iterations, {}) |\n\
              | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
-            encoded.solver["iterations"],
-            encoded.solver["termination"],
+            encoded.solver.iterations,
+            encoded.solver.termination,
             total - t_solve,
             peak_memory_bytes() as f64 / 1e6
         );

@@ -698,8 +698,14 @@ fn install_bundle(
                 retina_oversample: 2,
                 ..Default::default()
             };
-            let observer = Observer::new(&manifest.display, profile, EyePosition::default(), &options)
-                .map_err(|e| ClientError::Preview(e.to_string()))?;
+            let observer = Observer::new(
+                &manifest.display,
+                profile,
+                EyePosition::default(),
+                &options,
+                &eyekey_core::physics::transport::TransportCache::disabled(),
+            )
+            .map_err(|e| ClientError::Preview(e.to_string()))?;
             let picture = observer.picture(&observer.view(&light_field));
             eyekey_core::imaging::save_rgb_png(&picture, &staging.path().join(PREVIEW_FILE))
                 .map_err(|e| ClientError::Preview(error_chain(&e)))?;

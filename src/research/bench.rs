@@ -1,6 +1,7 @@
 //! `eyekey bench`: figures for the transport operator, the sparse kernels and the solver, printed and written
 //! to a Markdown file. Not a test: nothing here asserts on time.
 
+use eyekey_core::physics::transport::TransportCache;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
@@ -181,7 +182,7 @@ impl BenchProblem {
         ));
         let observers = people
             .iter()
-            .map(|p| Observer::new(display, p, EyePosition::default(), &opts))
+            .map(|p| Observer::new(display, p, EyePosition::default(), &opts, &TransportCache::disabled()))
             .collect::<Result<Vec<_>, _>>()?;
         let g = observers[0].transport.grid;
         let doc = eyekey_core::imaging::glyphs::render_text(

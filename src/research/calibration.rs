@@ -12,6 +12,7 @@
 //! the picture an attacker would start from: luminance stretched to 0..255, upscaled ×4 (bilinear), 8-bit
 //! grey. `views.csv` lists `file,text,legibility,ncc,kind`; `benches/calibrate_ocr.sh` OCRs them.
 
+use eyekey_core::physics::transport::TransportCache;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -119,6 +120,7 @@ fn random_pin<R: Rng>(rng: &mut R) -> String {
 fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<()> {
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let started = Instant::now();
+    let cache = TransportCache::default();
     let d = &setup.display;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     // The evaluation's own sub-ray jitter, different from every encoder's.
@@ -171,7 +173,7 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
             cylinder_d: 0.0,
             axis_deg: 0.0,
         });
-        let o = Observer::new(d, &person, EyePosition::default(), &topts)?;
+        let o = Observer::new(d, &person, EyePosition::default(), &topts, &cache)?;
         let (legibility, ncc, lum) = score(&doc, &o, &plain_light_field_for_image(d, &doc));
         let kind = format!(
             "plain defocus={defocus:+.2}D pupil={:.1}mm scale={scale}",
@@ -230,13 +232,14 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
             },
         };
         let t = Instant::now();
-        let enc = encode(&spec, &|_| {}, &cancel).map_err(|err| anyhow::anyhow!("encoding view set {e}: {err}"))?;
+        let enc =
+            encode(&spec, &cache, &|_| {}, &cancel).map_err(|err| anyhow::anyhow!("encoding view set {e}: {err}"))?;
         let l = &enc.light_field;
         let tag = format!("decoys={decoys} weight={weight} scale={scale}");
         let mut batch: Vec<(String, Observer)> = Vec::new();
         batch.push((
             format!("target {tag}"),
-            Observer::new(d, &target, EyePosition::default(), &topts)?,
+            Observer::new(d, &target, EyePosition::default(), &topts, &cache)?,
         ));
         for c in 0..setup.cameras_per_encoding {
             let focus = if c == 0 { 0.0 } else { rng.gen_range(-1.0..=1.0) };
@@ -249,14 +252,14 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
                 }),
                 ..VisionProfile::perfect()
             };
-            let o = Observer::new(d, &camera, EyePosition::default(), &topts)?;
+            let o = Observer::new(d, &camera, EyePosition::default(), &topts, &cache)?;
             batch.push((format!("camera focus={focus:+.2}D {tag}"), o));
         }
         for i in 0..setup.people_per_encoding {
             let p = &pool[(e * setup.people_per_encoding + i) % pool.len()];
             batch.push((
                 format!("person {tag}"),
-                Observer::new(d, p, EyePosition::default(), &topts)?,
+                Observer::new(d, p, EyePosition::default(), &topts, &cache)?,
             ));
         }
         let mut legs = Vec::new();

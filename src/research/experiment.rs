@@ -1,6 +1,7 @@
 //! `eyekey experiment`: the paper's §7.3 synthesized evaluation, a design-space sweep, and views for the
 //! legibility calibration. Each writes pictures and a Markdown table into an output directory.
 
+use eyekey_core::physics::transport::TransportCache;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -103,6 +104,7 @@ fn strip(tiles: &[(String, RgbImage)]) -> RgbImage {
 /// Reproduces the paper's §7.3 (Figs. 13–15) on the `paper` preset; writes pictures and `results.md`.
 pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let cache = TransportCache::default();
     let display = DisplayGeometry::paper();
     let observers = paper_observers();
     let g = (display.holes_x * 2, display.holes_y * 2);
@@ -116,7 +118,7 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
     };
     let viewers: Vec<Observer> = observers
         .iter()
-        .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts))
+        .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts, &cache))
         .collect::<Result<_, _>>()?;
     let grid = viewers[0].transport.grid;
     let reference = Reference::new(
@@ -192,11 +194,11 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
                 },
             };
             let t = Instant::now();
-            let enc = encode(&spec, &|_| {}, &cancel)?;
+            let enc = encode(&spec, &cache, &|_| {}, &cancel)?;
             timings.push(format!(
                 "Fig. {fig} {variant}: {:.1} s, {} iterations",
                 t.elapsed().as_secs_f64(),
-                enc.solver["iterations"]
+                enc.solver.iterations
             ));
             let tiles = score_all(fig, variant, &enc.light_field, &mut rows);
             let file = format!("fig{fig}_{}.png", variant.replace(' ', "_"));
@@ -242,7 +244,7 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
                 ..spec_opts
             },
         };
-        let enc = encode(&spec, &|_| {}, &cancel)?;
+        let enc = encode(&spec, &cache, &|_| {}, &cancel)?;
         let ev = evaluate(
             &display,
             &enc.light_field,
@@ -256,6 +258,7 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
                 head_offsets_mm: vec![],
                 ..Default::default()
             },
+            &cache,
             &|_| {},
             &cancel,
         )?;
@@ -334,6 +337,7 @@ fn sweep_display(views: u32, pitch_mm: f64, distance_mm: f64, holes: u32, bands:
 /// Maps the design space to (target legibility, fraction of a sampled population that can read).
 pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String, Vec<SweepPoint>)> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let cache = TransportCache::default();
     let target = {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
         eyekey_core::physics::population::sample_person(
@@ -447,7 +451,7 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
                 ..Default::default()
             },
         };
-        let enc = encode(&spec, &|_| {}, &cancel)?;
+        let enc = encode(&spec, &cache, &|_| {}, &cancel)?;
         let ev = evaluate(
             &display,
             &enc.light_field,
@@ -464,6 +468,7 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
                 camera_apertures_mm: vec![2.0, 6.0],
                 ..Default::default()
             },
+            &cache,
             &|_| {},
             &cancel,
         )?;
@@ -555,6 +560,7 @@ pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String
 /// sampled people, a camera attacker, key sensitivity and head movement.
 pub fn secure(out: &Path, population: u32) -> Result<String> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let cache = TransportCache::default();
     let display = DisplayGeometry::secure();
     let target = {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
@@ -584,13 +590,13 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     };
     let cancel = AtomicBool::new(false);
     let t = Instant::now();
-    let enc = encode(&spec, &|_| {}, &cancel)?;
+    let enc = encode(&spec, &cache, &|_| {}, &cancel)?;
     let t_encode = t.elapsed().as_secs_f64();
     let bundle = out.join("bundle");
     if bundle.exists() {
         std::fs::remove_dir_all(&bundle)?;
     }
-    eyekey_core::encoding::pipeline::write_outputs(&spec, &enc, &bundle, false, &|_| {}, &cancel)?;
+    eyekey_core::encoding::pipeline::write_outputs(&spec, &enc, &bundle, false, &cache, &|_| {}, &cancel)?;
     let t = Instant::now();
     let ev = evaluate(
         &display,
@@ -604,6 +610,7 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
             key_directions: 4,
             ..Default::default()
         },
+        &cache,
         &|_| {},
         &cancel,
     )?;
@@ -629,7 +636,7 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
         options.decoy_weight,
         options.adaptive_rounds,
         options.adaptive_candidates,
-        enc.solver["adaptive_decoys_added"],
+        serde_json::json!(enc.solver.adaptive_decoys_added),
         options.camera_decoys
     )?;
     writeln!(

@@ -1,5 +1,6 @@
 //! Building and running the service: secrets, database, router, workers, graceful shutdown.
 
+use eyekey_core::physics::transport::TransportCache;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -83,8 +84,6 @@ impl Application {
         store::check_master_key(&writer, &master_key).await?;
         tracing::info!(database = %config.database_path().display(), "database ready");
 
-        eyekey_core::physics::transport::TransportCache::global().set_capacity_bytes(config.transport_cache_bytes);
-
         let listener = TcpListener::bind(config.bind)
             .await
             .with_context(|| format!("binding {}", config.bind))?;
@@ -99,6 +98,7 @@ impl Application {
             shutdown: shutdown_rx,
             instance_id: uuid::Uuid::new_v4().to_string(),
             metrics: routes::metrics::recorder(),
+            transport_cache: Arc::new(TransportCache::new(config.transport_cache_bytes)),
             config,
         }));
         let router = router(state.clone());

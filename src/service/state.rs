@@ -62,6 +62,8 @@ pub struct Inner {
     pub instance_id: String,
     /// Prometheus registry.
     pub metrics: metrics_exporter_prometheus::PrometheusHandle,
+    /// Transport operators shared by this process's workers (per display, profile version and eye position).
+    pub transport_cache: Arc<eyekey_core::physics::transport::TransportCache>,
 }
 
 impl std::ops::Deref for AppState {

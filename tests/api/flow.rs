@@ -142,6 +142,7 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         &crate::helpers::myope(),
         eyekey_core::physics::transport::EyePosition::default(),
         &transport,
+        &eyekey_core::physics::transport::TransportCache::disabled(),
     )
     .unwrap();
     let grid = observer.transport.grid;

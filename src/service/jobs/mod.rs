@@ -143,12 +143,14 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
     let started = Instant::now();
     let mut solver = tokio::task::spawn_blocking({
         let (cancel, progress, tmp) = (cancel.clone(), progress.clone(), tmp.clone());
+        let cache = state.transport_cache.clone();
         move || -> Result<(serde_json::Value, Vec<bundle::BundleFile>), PipelineError> {
             let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
-            let output = run_job(&spec, &tmp, &report, &cancel)?;
-            let files =
-                bundle::seal_bundle(&tmp).map_err(|e| PipelineError::Internal(format!("writing the bundle: {e}")))?;
-            Ok((output.evaluation, files))
+            let output = run_job(&spec, &tmp, &cache, &report, &cancel)?;
+            let files = bundle::seal_bundle(&tmp).map_err(|e| PipelineError::internal("writing the bundle", e))?;
+            let evaluation = serde_json::to_value(&output.evaluation)
+                .map_err(|e| PipelineError::internal("recording the evaluation", e))?;
+            Ok((evaluation, files))
         }
     });
 
@@ -236,9 +238,9 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
                 .record(elapsed.as_secs_f64());
             end(state, &job, JobState::Cancelled, None).await?;
         }
-        (Ok(Err(PipelineError::Invalid(msg))), _) => {
+        (Ok(Err(e @ PipelineError::Invalid { .. })), _) => {
             discard(tmp).await;
-            end(state, &job, JobState::Failed, Some(&format!("invalid job: {msg}"))).await?;
+            end(state, &job, JobState::Failed, Some(&e.to_string())).await?;
         }
         (Ok(Err(e)), _) => {
             discard(tmp).await;

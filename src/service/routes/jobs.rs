@@ -177,18 +177,12 @@ impl TryFrom<&JobRow> for JobView {
 
 /// The pipeline's own range checks, reported with the offending field.
 fn check_options(o: &EncodeOptions) -> Result<(), ApiError> {
-    o.validate().map_err(|e| {
-        let text = match e {
-            PipelineError::Invalid(text) => text,
-            other => other.to_string(),
-        };
-        match text.split_once(": ") {
-            Some((field, why)) if !field.contains(' ') => ApiError::invalid(field, why),
-            _ => ApiError::Invalid {
-                field: Some("options".into()),
-                message: text,
-            },
-        }
+    o.validate().map_err(|e| match e {
+        PipelineError::Invalid { field, reason } => ApiError::invalid(&field, &reason),
+        other => ApiError::Invalid {
+            field: Some("options".into()),
+            message: other.to_string(),
+        },
     })
 }
 

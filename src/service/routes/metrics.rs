@@ -71,7 +71,7 @@ pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError>
         .find(|(s, _)| *s == store::jobs::JobState::Queued)
         .map_or(0, |(_, n)| *n);
     metrics::gauge!("eyekey_queue_depth").set(queued as f64);
-    let (hits, misses, bytes) = eyekey_core::physics::transport::TransportCache::global().stats();
+    let (hits, misses, bytes) = state.transport_cache.stats();
     metrics::gauge!("eyekey_transport_cache_hits").set(hits as f64);
     metrics::gauge!("eyekey_transport_cache_misses").set(misses as f64);
     metrics::gauge!("eyekey_transport_cache_bytes").set(bytes as f64);

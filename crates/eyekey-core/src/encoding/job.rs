@@ -1,11 +1,15 @@
 //! A job: its inputs, what it produced, and why it failed.
 
-use crate::physics::display::DisplayGeometry;
-use crate::physics::profile::VisionProfile;
 use std::path::PathBuf;
 
-#[allow(unused_imports)]
-use super::pipeline::*;
+use serde::{Deserialize, Serialize};
+
+use super::options::EncodeOptions;
+use super::solver::Termination;
+use crate::bundle::Manifest;
+use crate::evaluation::Report;
+use crate::physics::display::DisplayGeometry;
+use crate::physics::profile::VisionProfile;
 
 /// Everything one job needs.
 #[derive(Clone, Debug)]
@@ -30,11 +34,38 @@ pub struct JobSpec {
 #[derive(Clone, Debug)]
 pub struct JobOutput {
     /// The bundle's manifest as written to `manifest.json`.
-    pub manifest: serde_json::Value,
-    /// The evaluation report as written to `report.json`.
-    pub evaluation: serde_json::Value,
+    pub manifest: Manifest,
+    /// The evaluation report as written to `report.json` (none when the job was not evaluated).
+    pub evaluation: Option<Report>,
     /// Every file written into the output directory.
     pub files: Vec<PathBuf>,
+}
+
+/// What the solver did over all rounds of an encode; recorded in the manifest's `solver`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolverSummary {
+    /// The algorithm, in words.
+    pub algorithm: String,
+    /// Iterations over all rounds.
+    pub iterations: u32,
+    /// Momentum restarts over all rounds.
+    pub restarts: u32,
+    /// Why the last round stopped.
+    pub termination: Termination,
+    /// The objective at the end of the last round.
+    pub objective: f64,
+    /// The objective after every iteration of every round.
+    pub objective_history: Vec<f64>,
+    /// The last round's Lipschitz constant (step = 1/L).
+    pub lipschitz: f64,
+    /// Solver wall time over all rounds, seconds.
+    pub seconds: f64,
+    /// Observer terms in the final objective (target, head-box copies, decoys).
+    pub observers: usize,
+    /// Decoys added by each adaptive round.
+    pub adaptive_decoys_added: Vec<usize>,
+    /// Unknowns of the light field.
+    pub unknowns: usize,
 }
 
 /// Why a job did not produce a bundle.
@@ -42,14 +73,43 @@ pub struct JobOutput {
 #[non_exhaustive]
 pub enum PipelineError {
     /// The inputs do not fit together (a client error; retrying will not help).
-    #[error("invalid job: {0}")]
-    Invalid(String),
+    #[error("invalid job: {field}: {reason}")]
+    Invalid {
+        /// The offending input, as a path: `options.sub_rays`, `document`, `observers[2]`.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The cancel flag was raised.
     #[error("cancelled")]
     Cancelled,
     /// Anything else (I/O, numerical failure).
-    #[error("{0}")]
-    Internal(String),
+    #[error("{context}{}", source.as_ref().map(|e| format!(": {e}")).unwrap_or_default())]
+    Internal {
+        /// What was being done.
+        context: String,
+        /// The underlying error, if any.
+        #[source]
+        source: Option<Box<dyn std::error::Error + Send + Sync>>,
+    },
+}
+
+impl PipelineError {
+    /// An [`PipelineError::Invalid`] for `field`.
+    pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Invalid {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// An [`PipelineError::Internal`] while doing `context`, caused by `source`.
+    pub fn internal(context: impl Into<String>, source: impl std::error::Error + Send + Sync + 'static) -> Self {
+        Self::Internal {
+            context: context.into(),
+            source: Some(Box::new(source)),
+        }
+    }
 }
 
 /// Fraction of the display white the target is asked to see for document white: the rest is headroom the

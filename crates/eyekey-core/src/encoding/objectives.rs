@@ -313,7 +313,7 @@ mod tests {
     use super::*;
     use crate::encoding::solver::{minimise, SolverOptions};
     use crate::physics::profile::VisionProfile;
-    use crate::physics::transport::{EyePosition, TransportOptions};
+    use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
     use std::sync::atomic::AtomicBool;
 
     fn small_display() -> DisplayGeometry {
@@ -333,7 +333,7 @@ mod tests {
             derivative_terms: terms,
             ..Default::default()
         };
-        Observer::new(d, &p, EyePosition::default(), &opts).unwrap()
+        Observer::new(d, &p, EyePosition::default(), &opts, &TransportCache::disabled()).unwrap()
     }
 
     fn fd_check(obj: &dyn Objective, x: &[f32]) {

@@ -3,11 +3,11 @@
 use crate::physics::display::DisplayGeometry;
 use serde::{Deserialize, Serialize};
 
-#[allow(unused_imports)]
-use super::pipeline::*;
+use super::job::PipelineError;
 
 /// Which encoder to run (paper §6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
@@ -22,6 +22,7 @@ pub enum Method {
 
 /// Restrict the encoder to one kind of key (paper Figs. 14–15).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum Ablation {
@@ -35,6 +36,7 @@ pub enum Ablation {
 
 /// What the decoy observers are shown.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum DecoyKind {
@@ -119,7 +121,7 @@ impl Default for EncodeOptions {
 impl EncodeOptions {
     /// Checks every option's range; errors name the field.
     pub fn validate(&self) -> Result<(), PipelineError> {
-        let bad = |field: &str, why: String| Err(PipelineError::Invalid(format!("options.{field}: {why}")));
+        let bad = |field: &str, why: String| Err(PipelineError::invalid(format!("options.{field}"), why));
         if !(1..=256).contains(&self.sub_rays) {
             return bad("sub_rays", format!("must be within 1..=256, got {}", self.sub_rays));
         }

@@ -7,160 +7,325 @@ pub use super::job::*;
 pub use super::options::*;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use super::objectives::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
+use super::solver::{minimise, Objective, Progress, SolveResult, SolverOptions, Termination};
+use crate::evaluation::attackers::{camera_lens, head_ring, one_band_observers};
+use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
+use crate::physics::display::DisplayGeometry;
+use crate::physics::observer::{plain_light_field_for_image, Observer};
+use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
+use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportOptions};
 
 /// The light field and what the solver did.
 pub struct Encoded {
     /// Band-interleaved light field, `l[p·N + n]`, in [0, L_max].
     pub light_field: Vec<f32>,
-    /// The solver's result (without the light field).
-    pub solver: serde_json::Value,
+    /// What the solver did.
+    pub solver: SolverSummary,
 }
 
-/// Encodes a job's document into a light field (no files written).
-pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBool) -> Result<Encoded, PipelineError> {
-    use crate::encoding::objectives::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
-    use crate::encoding::solver::{minimise, Objective, SolverOptions};
-    use crate::physics::observer::Observer;
-    use crate::physics::transport::{EyePosition, TransportOptions};
-
+/// Encodes a job's document into a light field (no files written). Transport operators come from `cache`.
+pub fn encode(
+    spec: &JobSpec,
+    cache: &TransportCache,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<Encoded, PipelineError> {
+    validate_spec(spec)?;
     let o = &spec.options;
-    o.validate()?;
-    let d = &spec.display;
-    d.validate()
-        .map_err(|e| PipelineError::Invalid(format!("display: {e}")))?;
-    spec.target
-        .validate()
-        .map_err(|e| PipelineError::Invalid(format!("target profile: {e}")))?;
-    for (k, p) in spec.observers.iter().enumerate() {
-        p.validate()
-            .map_err(|e| PipelineError::Invalid(format!("observers[{k}]: {e}")))?;
-    }
-    if !aspect_matches(&spec.document, d) {
-        return Err(PipelineError::Invalid(format!(
-            "document is {}×{} pixels but the display is {}×{} holes: aspect ratios differ by more than 5 %",
-            spec.document.width(),
-            spec.document.height(),
-            d.holes_x,
-            d.holes_y
-        )));
-    }
-    if let Some(decoy) = &spec.decoy {
-        if !aspect_matches(decoy, d) {
-            return Err(PipelineError::Invalid(format!(
-                "decoy is {}×{} pixels; its aspect ratio must match the display's {}×{} holes",
-                decoy.width(),
-                decoy.height(),
-                d.holes_x,
-                d.holes_y
-            )));
-        }
-    }
-    let diffmax = matches!(o.method, Method::Diffmax | Method::Combined);
-    let base = TransportOptions {
-        sub_rays: o.sub_rays,
-        seed: o.seed,
-        retina_oversample: 1,
-        derivative_terms: vec![],
-    };
-    let target_opts = TransportOptions {
-        derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] },
-        ..base.clone()
-    };
-    let internal = |e: crate::physics::observer::ObserverError| PipelineError::Invalid(e.to_string());
-    let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts).map_err(internal)?;
-    progress(0.05);
-
-    // Everybody who must NOT read: given observers, then decoys sampled from the population.
-    let mut others_profiles = spec.observers.clone();
-    if !matches!(o.method, Method::Diffmax) {
-        others_profiles.extend(crate::physics::population::sample_population(
-            o.population_decoys as usize,
-            o.seed.wrapping_add(1),
-            Default::default(),
-        ));
-    } else {
-        others_profiles.clear();
-    }
-    let mut others = Vec::with_capacity(others_profiles.len());
-    for (k, p) in others_profiles.iter().enumerate() {
-        if cancel.load(std::sync::atomic::Ordering::Relaxed) {
-            return Err(PipelineError::Cancelled);
-        }
-        let mut obs = Observer::new(d, p, EyePosition::default(), &base).map_err(internal)?;
-        if o.ablation == Some(Ablation::Optical) {
-            // Optical only: the spectral key is taken away by giving everybody the target's cones.
-            obs = Observer::with_coupling(obs.transport.clone(), target.coupling_f64.clone(), d.l_max);
-        }
-        others.push(obs);
-        progress(0.05 + 0.1 * (k + 1) as f64 / others_profiles.len() as f64);
-    }
-    let g = target.transport.grid;
-    let n_bands_all = d.n_bands();
-    let target_obj = target.objective(&spec.document, OBJECTIVE_LEVEL);
-    let energy: f64 = target_obj.iter().map(|v| (*v as f64).powi(2)).sum();
-    // Stacked target observers at four eye positions on a ring of radius head_radius_mm, each asked for the
-    // document with a quarter of the central weight.
-    let mut moved = Vec::new();
-    if o.head_radius_mm > 0.0 {
-        let r = o.head_radius_mm;
-        for (dx, dy) in [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
-            let eye = EyePosition {
-                x_mm: dx,
-                y_mm: dy,
-                dz_mm: 0.0,
-            };
-            moved.push(Observer::new(d, &spec.target, eye, &base).map_err(internal)?);
-        }
-    }
-    if o.camera_decoys && !matches!(o.method, Method::Diffmax) {
-        for focus in [-0.5, 0.5] {
-            let rx = crate::physics::zernike::Prescription {
-                sphere_d: focus,
-                cylinder_d: 0.0,
-                axis_deg: 0.0,
-            };
-            let lens = crate::physics::zernike::ZernikeCoefficients::from_prescription(&rx, 6.0);
-            let tr = crate::physics::transport::TransportCache::global()
-                .get_or_build(d, &lens, EyePosition::default(), &base)
-                .map_err(|e| PipelineError::Invalid(e.to_string()))?;
-            for band in 0..n_bands_all {
-                let c = (0..n_bands_all)
-                    .map(|m| if m == band { [1.0; 3] } else { [0.0; 3] })
-                    .collect();
-                others.push(Observer::with_coupling(tr.clone(), c, d.l_max));
-            }
-        }
-    }
-    let decoy_for = |k: usize| match (o.decoy, &spec.decoy) {
-        (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
-        (DecoyKind::Image, Some(img)) => img.clone(),
-        _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
-    };
-    let mut decoy_objectives: Vec<Vec<f32>> = others
-        .iter()
-        .enumerate()
-        .map(|(k, obs)| obs.objective(&decoy_for(k), OBJECTIVE_LEVEL))
-        .collect();
-    let solver_opts = SolverOptions {
-        max_iterations: o.max_iterations,
-        tolerance: o.tolerance,
-        ..Default::default()
-    };
-    let rounds = if matches!(o.method, Method::Diffmax) {
+    let mut cast = Cast::build(spec, cache, progress, cancel)?;
+    let tied = o.ablation == Some(Ablation::Spectral);
+    let mut x = warm_start(&spec.display, &spec.document, tied);
+    let rounds = if o.method == Method::Diffmax {
         0
     } else {
         o.adaptive_rounds
     };
-    let total_its = o.max_iterations as f64 * (rounds + 1) as f64;
-    let l_max = d.l_max as f32;
-    let tied = o.ablation == Some(Ablation::Spectral);
-    // Warm start: the document shown plainly at the objective level.
-    let plain = crate::physics::observer::plain_light_field_for_image(d, &spec.document);
+    let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
+    let g = cast.target.transport.grid;
+    let reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+    let mut summary = SolverSummary {
+        algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
+        iterations: 0,
+        restarts: 0,
+        termination: Termination::MaxIterations,
+        objective: f64::NAN,
+        objective_history: Vec::new(),
+        lipschitz: f64::NAN,
+        seconds: 0.0,
+        observers: 0,
+        adaptive_decoys_added: Vec::new(),
+        unknowns: 0,
+    };
+    for round in 0..=rounds {
+        let done_before = summary.iterations as f64;
+        let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
+        let result = solve_round(spec, &cast, x, tied, report, cancel)?;
+        summary.iterations += result.iterations;
+        summary.restarts += result.restarts;
+        summary.seconds += result.seconds;
+        summary.objective_history.extend_from_slice(&result.history);
+        (summary.termination, summary.objective, summary.lipschitz) =
+            (result.termination, result.objective, result.lipschitz);
+        x = result.x;
+        if round == rounds {
+            break;
+        }
+        let l_now = expand_tied(&spec.display, &x, tied);
+        let added = cast.add_adaptive_decoys(spec, cache, &reference, &l_now, round, cancel)?;
+        summary.adaptive_decoys_added.push(added);
+        if added == 0 {
+            break;
+        }
+    }
+    let l = expand_tied(&spec.display, &x, tied);
+    progress(0.85);
+    summary.observers = cast.others.len() + 1 + cast.moved.len();
+    summary.unknowns = l.len();
+    Ok(Encoded {
+        light_field: l,
+        solver: summary,
+    })
+}
+
+/// Checks that the job's inputs fit together; errors name the input.
+fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
+    spec.options.validate()?;
+    let d = &spec.display;
+    d.validate()
+        .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
+    spec.target
+        .validate()
+        .map_err(|e| PipelineError::invalid("target profile", e.to_string()))?;
+    for (k, p) in spec.observers.iter().enumerate() {
+        p.validate()
+            .map_err(|e| PipelineError::invalid(format!("observers[{k}]"), e.to_string()))?;
+    }
+    if !aspect_matches(&spec.document, d) {
+        return Err(PipelineError::invalid(
+            "document",
+            format!(
+                "{}×{} pixels but the display is {}×{} holes: aspect ratios differ by more than 5 %",
+                spec.document.width(),
+                spec.document.height(),
+                d.holes_x,
+                d.holes_y
+            ),
+        ));
+    }
+    if let Some(decoy) = &spec.decoy {
+        if !aspect_matches(decoy, d) {
+            return Err(PipelineError::invalid(
+                "decoy",
+                format!(
+                    "{}×{} pixels; its aspect ratio must match the display's {}×{} holes",
+                    decoy.width(),
+                    decoy.height(),
+                    d.holes_x,
+                    d.holes_y
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Transport options of everybody but the target: no derivatives.
+fn base_transport(o: &EncodeOptions) -> TransportOptions {
+    TransportOptions {
+        sub_rays: o.sub_rays,
+        seed: o.seed,
+        retina_oversample: 1,
+        derivative_terms: vec![],
+    }
+}
+
+/// Who the encoder speaks to: the target (with the document as objective), the target's head-box copies,
+/// and everybody who must not read (given observers, population decoys, camera decoys, adaptive decoys),
+/// each with a decoy objective.
+struct Cast {
+    target: Observer,
+    target_objective: Vec<f32>,
+    /// ‖S'_t‖², the scale of the data term.
+    energy: f64,
+    moved: Vec<Observer>,
+    others: Vec<Observer>,
+    decoy_objectives: Vec<Vec<f32>>,
+}
+
+impl Cast {
+    fn build(
+        spec: &JobSpec,
+        cache: &TransportCache,
+        progress: &(dyn Fn(f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<Self, PipelineError> {
+        let (o, d) = (&spec.options, &spec.display);
+        let diffmax = matches!(o.method, Method::Diffmax | Method::Combined);
+        let target_opts = TransportOptions {
+            derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] },
+            ..base_transport(o)
+        };
+        let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, cache)
+            .map_err(|e| PipelineError::invalid("target profile", e.to_string()))?;
+        progress(0.05);
+        let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
+        let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
+        let mut cast = Self {
+            moved: head_box_observers(spec, cache)?,
+            others: Vec::new(),
+            decoy_objectives: Vec::new(),
+            target,
+            target_objective,
+            energy,
+        };
+        if o.method != Method::Diffmax {
+            cast.add_people(spec, cache, progress, cancel)?;
+            if o.camera_decoys {
+                cast.others.extend(camera_decoys(spec, cache)?);
+            }
+        }
+        cast.decoy_objectives = (0..cast.others.len())
+            .map(|k| cast.others[k].objective(&decoy_image(spec, cast.target.transport.grid, k), OBJECTIVE_LEVEL))
+            .collect();
+        Ok(cast)
+    }
+
+    /// Given observers, then decoys sampled from the population.
+    fn add_people(
+        &mut self,
+        spec: &JobSpec,
+        cache: &TransportCache,
+        progress: &(dyn Fn(f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<(), PipelineError> {
+        let o = &spec.options;
+        let mut people = spec.observers.clone();
+        people.extend(sample_population(
+            o.population_decoys as usize,
+            o.seed.wrapping_add(1),
+            Default::default(),
+        ));
+        for (k, p) in people.iter().enumerate() {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(PipelineError::Cancelled);
+            }
+            let observer = self.decoy_observer(spec, p, cache, format!("observers[{k}]"))?;
+            self.others.push(observer);
+            progress(0.05 + 0.1 * (k + 1) as f64 / people.len() as f64);
+        }
+        Ok(())
+    }
+
+    /// A person who must not read; under the optical-only ablation they get the target's cones, which takes
+    /// the spectral key away.
+    fn decoy_observer(
+        &self,
+        spec: &JobSpec,
+        person: &VisionProfile,
+        cache: &TransportCache,
+        field: String,
+    ) -> Result<Observer, PipelineError> {
+        let d = &spec.display;
+        let observer = Observer::new(d, person, EyePosition::default(), &base_transport(&spec.options), cache)
+            .map_err(|e| PipelineError::invalid(field, e.to_string()))?;
+        Ok(if spec.options.ablation == Some(Ablation::Optical) {
+            Observer::with_coupling(observer.transport.clone(), self.target.coupling_f64.clone(), d.l_max)
+        } else {
+            observer
+        })
+    }
+
+    /// Adaptive decoys: samples fresh candidates (a seed stream the evaluation never uses) and adds as decoys
+    /// those who can still read `l_now`, most legible first. Returns how many were added.
+    fn add_adaptive_decoys(
+        &mut self,
+        spec: &JobSpec,
+        cache: &TransportCache,
+        reference: &Reference,
+        l_now: &[f32],
+        round: u32,
+        cancel: &AtomicBool,
+    ) -> Result<usize, PipelineError> {
+        let o = &spec.options;
+        let candidates = sample_population(
+            o.adaptive_candidates as usize,
+            o.seed.wrapping_add(7_000 + 1_000 * round as u64),
+            Default::default(),
+        );
+        let mut scored = Vec::new();
+        for (k, p) in candidates.iter().enumerate() {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(PipelineError::Cancelled);
+            }
+            let observer = self.decoy_observer(spec, p, cache, format!("adaptive candidate {k}"))?;
+            let legibility = reference.score_observer("candidate", &observer, l_now).0.legibility;
+            scored.push((legibility, observer));
+        }
+        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut added = 0;
+        for (legibility, observer) in scored.into_iter().take(o.adaptive_per_round as usize) {
+            if legibility < 0.8 * reference.threshold {
+                break;
+            }
+            let decoy = decoy_image(spec, self.target.transport.grid, self.others.len());
+            self.decoy_objectives.push(observer.objective(&decoy, OBJECTIVE_LEVEL));
+            self.others.push(observer);
+            added += 1;
+        }
+        Ok(added)
+    }
+}
+
+/// The target at four eye positions on a ring of radius `head_radius_mm` (none when it is 0); each is asked
+/// for the document with a quarter of the central weight.
+fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
+    let r = spec.options.head_radius_mm;
+    if r <= 0.0 {
+        return Ok(Vec::new());
+    }
+    head_ring(r)
+        .into_iter()
+        .map(|eye| {
+            Observer::new(&spec.display, &spec.target, eye, &base_transport(&spec.options), cache)
+                .map_err(|e| PipelineError::invalid("target profile", e.to_string()))
+        })
+        .collect()
+}
+
+/// Camera decoys: an ideal 6 mm lens focused ±0.5 D off the display behind each one-band filter.
+fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
+    let d = &spec.display;
+    let mut out = Vec::new();
+    for focus in [-0.5, 0.5] {
+        let lens = camera_lens(focus, 6.0);
+        let transport = cache
+            .get_or_build(d, &lens, EyePosition::default(), &base_transport(&spec.options))
+            .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
+        out.extend(one_band_observers(transport, d));
+    }
+    Ok(out)
+}
+
+/// The decoy image shown to the k-th person who must not read.
+fn decoy_image(spec: &JobSpec, g: RetinalGrid, k: usize) -> image::RgbImage {
+    let o = &spec.options;
+    match (o.decoy, &spec.decoy) {
+        (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
+        (DecoyKind::Image, Some(img)) => img.clone(),
+        _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
+    }
+}
+
+/// The solver's starting point: the document shown plainly at the objective level (one value per hole and
+/// band when the views are tied).
+fn warm_start(d: &DisplayGeometry, document: &image::RgbImage, tied: bool) -> Vec<f32> {
+    let plain = plain_light_field_for_image(d, document);
     let n = d.n_bands();
-    let mut x: Vec<f32> = if tied {
+    if tied {
         (0..(d.holes_x * d.holes_y) as usize * n)
             .map(|h| {
                 let (hx, hy) = ((h / n) as u32 % d.holes_x, (h / n) as u32 / d.holes_x);
@@ -169,153 +334,99 @@ pub fn encode(spec: &JobSpec, progress: &(dyn Fn(f64) + Sync), cancel: &AtomicBo
             .collect()
     } else {
         plain.iter().map(|v| v * OBJECTIVE_LEVEL as f32).collect()
-    };
-    let mut history = Vec::new();
-    let (mut iterations, mut restarts, mut seconds) = (0u32, 0u32, 0.0f64);
-    let mut last = None;
-    let mut added_per_round = Vec::new();
-    let reference = crate::evaluation::Reference::new(
-        &spec.document,
-        g.width,
-        g.height,
-        OBJECTIVE_LEVEL,
-        crate::evaluation::DEFAULT_THRESHOLD,
-    );
-    for round in 0..=rounds {
-        let done_before = iterations as f64;
-        let mut report = |p: crate::encoding::solver::Progress| {
-            progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_its)
-        };
-        let result = {
-            let mut terms = vec![Term {
-                observer: &target,
-                objective: target_obj.clone(),
-                weight: 1.0,
-            }];
-            for m in &moved {
-                terms.push(Term {
-                    observer: m,
-                    objective: target_obj.clone(),
-                    weight: 0.25,
-                });
-            }
-            for (obs, obj) in others.iter().zip(&decoy_objectives) {
-                terms.push(Term {
-                    observer: obs,
-                    objective: obj.clone(),
-                    weight: o.decoy_weight,
-                });
-            }
-            let data = MultiplexObjective::new(terms, n, energy, 1e-4);
-            let dm;
-            let objective: &dyn Objective = if diffmax {
-                // Ablations take the other key's derivative term away: optical only keeps λ_W, spectral only λ_c.
-                let lambda_w = if o.ablation == Some(Ablation::Spectral) {
-                    0.0
-                } else {
-                    o.lambda_w
-                };
-                let lambda_c = if o.ablation == Some(Ablation::Optical) {
-                    0.0
-                } else {
-                    o.lambda_c
-                };
-                dm = DiffMaxObjective::new(data, &target, lambda_w, lambda_c);
-                &dm
-            } else {
-                &data
-            };
-            if tied {
-                let t = TiedViews::new(objective, d);
-                minimise(&t, x.clone(), 0.0, l_max, &solver_opts, &mut report, cancel)
-            } else {
-                minimise(objective, x.clone(), 0.0, l_max, &solver_opts, &mut report, cancel)
-            }
-        };
-        if result.termination == crate::encoding::solver::Termination::Cancelled {
-            return Err(PipelineError::Cancelled);
-        }
-        if result.termination == crate::encoding::solver::Termination::NumericalFailure {
-            return Err(PipelineError::Internal(
-                "the solver's objective became non-finite".into(),
-            ));
-        }
-        iterations += result.iterations;
-        restarts += result.restarts;
-        seconds += result.seconds;
-        history.extend_from_slice(&result.history);
-        x = result.x.clone();
-        last = Some(result);
-        if round == rounds {
-            break;
-        }
-        // Adaptive decoys: sample fresh candidates (a seed stream the evaluation never uses), and add as decoy
-        // observers the ones who can still read, most legible first.
-        let l_now = if tied {
-            TiedViews::new(&DummyDim(x.len()), d).expand(&x)
-        } else {
-            x.clone()
-        };
-        let candidates = crate::physics::population::sample_population(
-            o.adaptive_candidates as usize,
-            o.seed.wrapping_add(7_000 + 1_000 * round as u64),
-            Default::default(),
-        );
-        let mut scored = Vec::new();
-        for p in &candidates {
-            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
-                return Err(PipelineError::Cancelled);
-            }
-            let mut obs = Observer::new(d, p, EyePosition::default(), &base).map_err(internal)?;
-            if o.ablation == Some(Ablation::Optical) {
-                obs = Observer::with_coupling(obs.transport.clone(), target.coupling_f64.clone(), d.l_max);
-            }
-            let legibility = reference.score_observer("candidate", &obs, &l_now).0.legibility;
-            scored.push((legibility, obs));
-        }
-        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let mut added = 0;
-        for (legibility, obs) in scored.into_iter().take(o.adaptive_per_round as usize) {
-            if legibility < 0.8 * reference.threshold {
-                break;
-            }
-            let k = others.len();
-            decoy_objectives.push(obs.objective(&decoy_for(k), OBJECTIVE_LEVEL));
-            others.push(obs);
-            added += 1;
-        }
-        added_per_round.push(added);
-        if added == 0 {
-            break;
-        }
     }
-    let result = last.expect("at least one round ran");
-    let l = if tied {
-        TiedViews::new(&DummyDim(x.len()), d).expand(&x)
+}
+
+/// The full light field of the solver's variable (a copy when the views are not tied).
+fn expand_tied(d: &DisplayGeometry, x: &[f32], tied: bool) -> Vec<f32> {
+    if tied {
+        TiedViews::new(&DummyDim(x.len()), d).expand(x)
     } else {
-        x
+        x.to_vec()
+    }
+}
+
+/// One solve of the encoder's objective (Eq. 14, with Eq. 16's terms for difference maximisation) from `x`.
+fn solve_round(
+    spec: &JobSpec,
+    cast: &Cast,
+    x: Vec<f32>,
+    tied: bool,
+    mut report: impl FnMut(Progress),
+    cancel: &AtomicBool,
+) -> Result<SolveResult, PipelineError> {
+    let (o, d) = (&spec.options, &spec.display);
+    let mut terms = vec![Term {
+        observer: &cast.target,
+        objective: cast.target_objective.clone(),
+        weight: 1.0,
+    }];
+    for m in &cast.moved {
+        terms.push(Term {
+            observer: m,
+            objective: cast.target_objective.clone(),
+            weight: 0.25,
+        });
+    }
+    for (observer, objective) in cast.others.iter().zip(&cast.decoy_objectives) {
+        terms.push(Term {
+            observer,
+            objective: objective.clone(),
+            weight: o.decoy_weight,
+        });
+    }
+    let data = MultiplexObjective::new(terms, d.n_bands(), cast.energy, 1e-4);
+    let dm;
+    let objective: &dyn Objective = if matches!(o.method, Method::Diffmax | Method::Combined) {
+        // Ablations take the other key's derivative term away: optical only keeps λ_W, spectral only λ_c.
+        let lambda_w = if o.ablation == Some(Ablation::Spectral) {
+            0.0
+        } else {
+            o.lambda_w
+        };
+        let lambda_c = if o.ablation == Some(Ablation::Optical) {
+            0.0
+        } else {
+            o.lambda_c
+        };
+        dm = DiffMaxObjective::new(data, &cast.target, lambda_w, lambda_c);
+        &dm
+    } else {
+        &data
     };
-    progress(0.85);
-    let solver = serde_json::json!({
-        "algorithm": "FISTA with gradient restart, step 1/L (power iteration)",
-        "iterations": iterations,
-        "restarts": restarts,
-        "termination": result.termination,
-        "objective": result.objective,
-        "objective_history": history,
-        "lipschitz": result.lipschitz,
-        "seconds": seconds,
-        "observers": others.len() + 1 + moved.len(),
-        "adaptive_decoys_added": added_per_round,
-        "unknowns": l.len(),
-    });
-    Ok(Encoded { light_field: l, solver })
+    let solver_opts = SolverOptions {
+        max_iterations: o.max_iterations,
+        tolerance: o.tolerance,
+        ..Default::default()
+    };
+    let l_max = d.l_max as f32;
+    let result = if tied {
+        minimise(
+            &TiedViews::new(objective, d),
+            x,
+            0.0,
+            l_max,
+            &solver_opts,
+            &mut report,
+            cancel,
+        )
+    } else {
+        minimise(objective, x, 0.0, l_max, &solver_opts, &mut report, cancel)
+    };
+    match result.termination {
+        Termination::Cancelled => Err(PipelineError::Cancelled),
+        Termination::NumericalFailure => Err(PipelineError::Internal {
+            context: "the solver's objective became non-finite".into(),
+            source: None,
+        }),
+        _ => Ok(result),
+    }
 }
 
 /// A stand-in objective used only to reach [`TiedViews::expand`], which needs no objective.
 struct DummyDim(usize);
 
-impl crate::encoding::solver::Objective for DummyDim {
+impl Objective for DummyDim {
     fn dim(&self) -> usize {
         self.0
     }
@@ -329,11 +440,20 @@ impl crate::encoding::solver::Objective for DummyDim {
 pub fn run_job(
     spec: &JobSpec,
     out_dir: &Path,
+    cache: &TransportCache,
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<JobOutput, PipelineError> {
-    let encoded = encode(spec, &|p| progress(0.8 * p), cancel)?;
-    write_outputs(spec, &encoded, out_dir, true, &|p| progress(0.8 + 0.2 * p), cancel)
+    let encoded = encode(spec, cache, &|p| progress(0.8 * p), cancel)?;
+    write_outputs(
+        spec,
+        &encoded,
+        out_dir,
+        true,
+        cache,
+        &|p| progress(0.8 + 0.2 * p),
+        cancel,
+    )
 }
 
 /// Evaluates an encoded light field (when `with_evaluation`), then writes its bundle into `out_dir` and the
@@ -343,22 +463,61 @@ pub fn write_outputs(
     encoded: &Encoded,
     out_dir: &Path,
     with_evaluation: bool,
+    cache: &TransportCache,
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<JobOutput, PipelineError> {
-    use crate::evaluation::{evaluate, EvaluationOptions};
-    let io = |e: std::io::Error| PipelineError::Internal(format!("writing {}: {e}", out_dir.display()));
-    let document_sha256 = {
-        use sha2::Digest;
-        hex::encode(sha2::Sha256::digest(spec.document.as_raw()))
-    };
-    let meta = crate::bundle::BundleMeta {
-        profile_label: spec.target_label.clone(),
-        document_sha256,
-        encoder: serde_json::to_value(&spec.options).map_err(|e| PipelineError::Internal(e.to_string()))?,
-        solver: encoded.solver.clone(),
-    };
+    let meta = bundle_meta(spec, encoded)?;
     // Evaluate first, so a cancelled or failed evaluation leaves no bundle behind.
+    let evaluation = if with_evaluation {
+        Some(evaluate_job(spec, encoded, cache, &|p| progress(0.9 * p), cancel)?)
+    } else {
+        None
+    };
+    let manifest = crate::bundle::write_bundle(out_dir, &spec.display, &encoded.light_field, &meta, &[], 4)
+        .map_err(|e| PipelineError::internal("writing the bundle", e))?;
+    // Operator-only outputs live beside the bundle and are never listed in its manifest.
+    let mut files = Vec::new();
+    if let Some(evaluation) = &evaluation {
+        files.extend(
+            write_evaluation(evaluation, out_dir)
+                .map_err(|e| PipelineError::internal(format!("writing {}", out_dir.display()), e))?,
+        );
+    }
+    for f in &manifest.files {
+        files.push(out_dir.join(&f.name));
+    }
+    files.push(out_dir.join(crate::bundle::MANIFEST_FILE));
+    progress(1.0);
+    Ok(JobOutput {
+        manifest,
+        evaluation: evaluation.map(|e| e.report),
+        files,
+    })
+}
+
+/// What the manifest records about this encode.
+fn bundle_meta(spec: &JobSpec, encoded: &Encoded) -> Result<crate::bundle::BundleMeta, PipelineError> {
+    use sha2::Digest;
+    let record = |what: &str, e: serde_json::Error| PipelineError::internal(format!("recording the {what}"), e);
+    Ok(crate::bundle::BundleMeta {
+        profile_label: spec.target_label.clone(),
+        document_sha256: hex::encode(sha2::Sha256::digest(spec.document.as_raw())),
+        encoder: serde_json::to_value(&spec.options).map_err(|e| record("encoder options", e))?,
+        solver: serde_json::to_value(&encoded.solver).map_err(|e| record("solver summary", e))?,
+    })
+}
+
+/// The job's own evaluation: its observers, a population of `evaluation_population`, with a seed stream the
+/// encoder never used.
+fn evaluate_job(
+    spec: &JobSpec,
+    encoded: &Encoded,
+    cache: &TransportCache,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<crate::evaluation::Evaluation, PipelineError> {
+    use crate::evaluation::{evaluate, EvaluationError, EvaluationOptions};
     let eval_opts = EvaluationOptions {
         population: spec.options.evaluation_population,
         seed: spec.options.seed.wrapping_add(20_000),
@@ -371,45 +530,21 @@ pub fn write_outputs(
         .enumerate()
         .map(|(k, p)| (format!("observer_{k}"), p.clone()))
         .collect();
-    let evaluation = if !with_evaluation {
-        None
-    } else {
-        Some(
-            evaluate(
-                &spec.display,
-                &encoded.light_field,
-                &spec.document,
-                OBJECTIVE_LEVEL,
-                &spec.target,
-                &labelled,
-                &eval_opts,
-                &|p| progress(0.9 * p),
-                cancel,
-            )
-            .map_err(|e| match e {
-                crate::evaluation::EvaluationError::Cancelled => PipelineError::Cancelled,
-                other => PipelineError::Internal(other.to_string()),
-            })?,
-        )
-    };
-    let manifest = crate::bundle::write_bundle(out_dir, &spec.display, &encoded.light_field, &meta, &[], 4)
-        .map_err(|e| PipelineError::Internal(e.to_string()))?;
-    // Operator-only outputs live beside the bundle and are never listed in its manifest.
-    let mut files = Vec::new();
-    let mut report = serde_json::Value::Null;
-    if let Some(evaluation) = &evaluation {
-        report = serde_json::to_value(&evaluation.report).map_err(|e| PipelineError::Internal(e.to_string()))?;
-        files.extend(write_evaluation(evaluation, out_dir).map_err(io)?);
-    }
-    for f in &manifest.files {
-        files.push(out_dir.join(&f.name));
-    }
-    files.push(out_dir.join(crate::bundle::MANIFEST_FILE));
-    progress(1.0);
-    Ok(JobOutput {
-        manifest: serde_json::to_value(&manifest).map_err(|e| PipelineError::Internal(e.to_string()))?,
-        evaluation: report,
-        files,
+    evaluate(
+        &spec.display,
+        &encoded.light_field,
+        &spec.document,
+        OBJECTIVE_LEVEL,
+        &spec.target,
+        &labelled,
+        &eval_opts,
+        cache,
+        progress,
+        cancel,
+    )
+    .map_err(|e| match e {
+        EvaluationError::Cancelled => PipelineError::Cancelled,
+        other => PipelineError::internal("evaluating the result", other),
     })
 }
 

@@ -66,6 +66,24 @@ pub enum Termination {
     NumericalFailure,
 }
 
+impl Termination {
+    /// The name used in JSON: `converged`, `max_iterations`, `cancelled`, `numerical_failure`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Converged => "converged",
+            Self::MaxIterations => "max_iterations",
+            Self::Cancelled => "cancelled",
+            Self::NumericalFailure => "numerical_failure",
+        }
+    }
+}
+
+impl std::fmt::Display for Termination {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// Solver options.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SolverOptions {

@@ -140,3 +140,13 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     percentile(v, 0.5)
 }
+
+/// The attacker's contrast stretch: each value mapped linearly so that the image's minimum is 0 and its
+/// maximum 1 (a constant image maps to 0).
+pub fn stretch_to_unit(values: &[f32]) -> Vec<f32> {
+    let (lo, hi) = values
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+    let span = (hi - lo).max(1e-12);
+    values.iter().map(|v| (v - lo) / span).collect()
+}

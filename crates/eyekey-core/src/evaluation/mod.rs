@@ -8,7 +8,7 @@
 //! Every simulated view here uses a sub-ray jitter seed different from the encoder's, so an encoding cannot
 //! look good merely by fitting the sampling pattern of its own transport operator.
 
-mod attackers;
+pub mod attackers;
 mod contact_sheet;
 mod key_sensitivity;
 mod metrics;
@@ -33,11 +33,10 @@ use crate::physics::observer::Observer;
 use crate::physics::population::{sample_population, SamplingScope};
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
-use crate::physics::transport::{EyePosition, TransportOptions};
-use crate::physics::zernike::ZernikeCoefficients;
+use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
 
 /// Evaluates light field `l`: the target, the given observers, a population sample, a camera attacker, key
-/// sensitivity and head movement. `progress` receives 0..=1.
+/// sensitivity and head movement. Transport operators come from `cache`; `progress` receives 0..=1.
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate(
     display: &DisplayGeometry,
@@ -47,6 +46,7 @@ pub fn evaluate(
     target: &VisionProfile,
     observers: &[(String, VisionProfile)],
     options: &EvaluationOptions,
+    cache: &TransportCache,
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Evaluation, EvaluationError> {
@@ -55,198 +55,32 @@ pub fn evaluate(
         seed: options.seed ^ 0xE7A1,
         ..Default::default()
     };
-    let check = || {
-        if cancel.load(Ordering::Relaxed) {
-            Err(EvaluationError::Cancelled)
-        } else {
-            Ok(())
-        }
-    };
-    let t_obs = Observer::new(display, target, EyePosition::default(), &topts)?;
+    let t_obs = Observer::new(display, target, EyePosition::default(), &topts, cache)?;
     let g = t_obs.transport.grid;
-    let reference = Reference::new(document, g.width, g.height, level, options.threshold);
-    let mut pictures = Vec::new();
+    let mut ev = Evaluator {
+        display,
+        l,
+        target,
+        options,
+        topts,
+        cache,
+        cancel,
+        reference: Reference::new(document, g.width, g.height, level, options.threshold),
+        pictures: Vec::new(),
+    };
     let objective = t_obs.objective(document, level);
-    pictures.push(("objective.png".to_string(), t_obs.picture(&objective)));
-    let (target_score, pic) = reference.score_observer("target", &t_obs, l);
-    pictures.push(("target.png".to_string(), pic));
-
-    let mut observer_scores = Vec::new();
-    for (k, (label, p)) in observers.iter().enumerate() {
-        check()?;
-        let o = Observer::new(display, p, EyePosition::default(), &topts)?;
-        let (s, pic) = reference.score_observer(label, &o, l);
-        observer_scores.push(s);
-        pictures.push((format!("observer_{k}.png"), pic));
-    }
+    ev.pictures
+        .push(("objective.png".to_string(), t_obs.picture(&objective)));
+    let (target_score, pic) = ev.reference.score_observer("target", &t_obs, l);
+    ev.pictures.push(("target.png".to_string(), pic));
+    let observer_scores = ev.observers(observers)?;
     progress(0.1);
-
-    // Population: people sampled from published statistics, each at the design eye position (the worst case:
-    // a bystander who takes the target's seat).
-    let population = if options.population > 0 {
-        let people = sample_population(options.population as usize, options.seed, SamplingScope::default());
-        let mut scores = Vec::with_capacity(people.len());
-        let mut kept: Vec<(usize, RgbImage)> = Vec::new();
-        for (k, p) in people.iter().enumerate() {
-            check()?;
-            let o = Observer::new(display, p, EyePosition::default(), &topts)?;
-            let (s, pic) = reference.score_observer(&format!("person_{k}"), &o, l);
-            if (k as u32) < options.saved_population_views {
-                kept.push((k, pic.clone()));
-            }
-            let worst_so_far = scores.iter().all(|w: &ViewScore| s.legibility > w.legibility);
-            if worst_so_far {
-                kept.retain(|(i, _)| *i != usize::MAX);
-                kept.push((usize::MAX, pic));
-            }
-            scores.push(s);
-            progress(0.1 + 0.5 * (k + 1) as f64 / people.len() as f64);
-        }
-        for (k, pic) in kept {
-            let name = if k == usize::MAX {
-                "population_worst.png".to_string()
-            } else {
-                format!("person_{k}.png")
-            };
-            pictures.push((name, pic));
-        }
-        let mut legs: Vec<f64> = scores.iter().map(|s| s.legibility).collect();
-        legs.sort_by(|a, b| a.total_cmp(b));
-        let readable = scores.iter().filter(|s| s.readable).count() as u32;
-        Some(PopulationSummary {
-            count: scores.len() as u32,
-            readable_count: readable,
-            readable_fraction: readable as f64 / scores.len().max(1) as f64,
-            median_legibility: percentile(&legs, 0.5),
-            p95_legibility: percentile(&legs, 0.95),
-            max_legibility: legs.last().copied().unwrap_or(0.0),
-            fraction_at_or_above: [0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6]
-                .iter()
-                .map(|&t| {
-                    (
-                        t,
-                        legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64,
-                    )
-                })
-                .collect(),
-            people: scores,
-        })
-    } else {
-        None
-    };
-
-    // Camera attacker: ideal optics, focus swept, several apertures, RGB sensor with and without a narrow
-    // filter per projector band; each channel judged alone; its best case is reported.
-    let camera = if !options.camera_focus_d.is_empty() && !options.camera_apertures_mm.is_empty() {
-        let rgb = coupling(&display.projectors, &camera_rgb()).c;
-        let mut tried = Vec::new();
-        let mut best: Option<(ViewScore, RgbImage)> = None;
-        for &aperture in &options.camera_apertures_mm {
-            for &focus in &options.camera_focus_d {
-                check()?;
-                let w = ZernikeCoefficients::from_prescription(
-                    &crate::physics::zernike::Prescription {
-                        sphere_d: focus,
-                        cylinder_d: 0.0,
-                        axis_deg: 0.0,
-                    },
-                    aperture,
-                );
-                let tr = crate::physics::transport::TransportCache::global()
-                    .get_or_build(display, &w, EyePosition::default(), &topts)
-                    .map_err(crate::physics::observer::ObserverError::from)?;
-                // Channel configurations: R, G, B of the sensor, then each band isolated by a filter.
-                let mut configs: Vec<(String, Vec<[f64; 3]>)> = (0..3)
-                    .map(|ch| {
-                        let name = ["R", "G", "B"][ch];
-                        (name.to_string(), rgb.iter().map(|c| [c[ch], c[ch], c[ch]]).collect())
-                    })
-                    .collect();
-                for n in 0..display.n_bands() {
-                    let sel = (0..display.n_bands())
-                        .map(|m| if m == n { [1.0; 3] } else { [0.0; 3] })
-                        .collect();
-                    configs.push((format!("filter_band_{n}"), sel));
-                }
-                for (name, c) in configs {
-                    let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
-                    let view = cam.view(l);
-                    let lum: Vec<f32> = view.chunks_exact(3).map(|p| p[0]).collect();
-                    let label = format!("camera f={focus:+.1}D aperture={aperture}mm {name}");
-                    let s = reference.score(&label, &lum, cam.white[0]);
-                    if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
-                        // The attacker's picture: the channel stretched to its own range, shown in grey.
-                        let (lo, hi) = lum
-                            .iter()
-                            .fold((f32::MAX, f32::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
-                        let pic = RgbImage::from_fn(g.width, g.height, |x, y| {
-                            let v = (lum[(y * g.width + x) as usize] - lo) / (hi - lo).max(1e-12);
-                            let b = (v.clamp(0.0, 1.0) * 255.0) as u8;
-                            Rgb([b, b, b])
-                        });
-                        best = Some((s.clone(), pic));
-                    }
-                    tried.push(s);
-                }
-            }
-        }
-        progress(0.75);
-        best.map(|(b, pic)| {
-            pictures.push(("camera_best.png".to_string(), pic));
-            CameraSummary { best: b, tried }
-        })
-    } else {
-        None
-    };
-
-    let key_sensitivity = if options.key_directions > 0 {
-        check()?;
-        Some(key_sensitivity(
-            display, l, target, &reference, options, &topts, cancel,
-        )?)
-    } else {
-        None
-    };
+    let population = ev.population(&|p| progress(0.1 + 0.5 * p))?;
+    let camera = ev.camera()?;
+    progress(0.75);
+    let key_sensitivity = ev.key_sensitivity()?;
     progress(0.9);
-
-    let head_movement = if !options.head_offsets_mm.is_empty() {
-        let mut worst = Vec::new();
-        for &r in &options.head_offsets_mm {
-            check()?;
-            let mut w = f64::INFINITY;
-            for (dx, dy) in [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)] {
-                let o = Observer::new(
-                    display,
-                    target,
-                    EyePosition {
-                        x_mm: dx,
-                        y_mm: dy,
-                        dz_mm: 0.0,
-                    },
-                    &topts,
-                )?;
-                w = w.min(reference.score_observer("target moved", &o, l).0.legibility);
-            }
-            worst.push(w);
-        }
-        let mut radius = 0.0;
-        if target_score.readable {
-            for (r, w) in options.head_offsets_mm.iter().zip(&worst) {
-                if *w >= options.threshold {
-                    radius = *r;
-                } else {
-                    break;
-                }
-            }
-        }
-        Some(HeadMovement {
-            offsets_mm: options.head_offsets_mm.clone(),
-            worst_legibility: worst,
-            readable_radius_mm: radius,
-        })
-    } else {
-        None
-    };
+    let head_movement = ev.head_movement(target_score.readable)?;
     progress(1.0);
 
     let mut report = Report {
@@ -264,8 +98,186 @@ pub fn evaluate(
     if let (Some(k), Some(p)) = (report.key_sensitivity.as_mut(), report.population.as_ref()) {
         k.empirical_bits = -(((p.readable_count + 1) as f64) / ((p.count + 1) as f64)).log2();
     }
+    let mut pictures = ev.pictures;
     pictures.push(("contact_sheet.png".to_string(), contact_sheet(&report, &pictures)));
     Ok(Evaluation { report, pictures })
+}
+
+/// One evaluation's shared state: what is looked at, with which transport, and the pictures kept so far.
+struct Evaluator<'a> {
+    display: &'a DisplayGeometry,
+    l: &'a [f32],
+    target: &'a VisionProfile,
+    options: &'a EvaluationOptions,
+    /// Transport options with the evaluation's own jitter seed.
+    topts: TransportOptions,
+    cache: &'a TransportCache,
+    cancel: &'a AtomicBool,
+    reference: Reference,
+    pictures: Vec<(String, RgbImage)>,
+}
+
+impl Evaluator<'_> {
+    fn check(&self) -> Result<(), EvaluationError> {
+        if self.cancel.load(Ordering::Relaxed) {
+            Err(EvaluationError::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+
+    fn observer(&self, profile: &VisionProfile, eye: EyePosition) -> Result<Observer, EvaluationError> {
+        Ok(Observer::new(self.display, profile, eye, &self.topts, self.cache)?)
+    }
+
+    /// The given observers' scores (and a picture each).
+    fn observers(&mut self, observers: &[(String, VisionProfile)]) -> Result<Vec<ViewScore>, EvaluationError> {
+        let mut scores = Vec::new();
+        for (k, (label, p)) in observers.iter().enumerate() {
+            self.check()?;
+            let o = self.observer(p, EyePosition::default())?;
+            let (s, pic) = self.reference.score_observer(label, &o, self.l);
+            scores.push(s);
+            self.pictures.push((format!("observer_{k}.png"), pic));
+        }
+        Ok(scores)
+    }
+
+    /// People sampled from published statistics, each at the design eye position (the worst case: a
+    /// bystander who takes the target's seat). Keeps the first views asked for and the most legible one.
+    fn population(&mut self, progress: &dyn Fn(f64)) -> Result<Option<PopulationSummary>, EvaluationError> {
+        let options = self.options;
+        if options.population == 0 {
+            return Ok(None);
+        }
+        let people = sample_population(options.population as usize, options.seed, SamplingScope::default());
+        let mut scores = Vec::with_capacity(people.len());
+        let mut kept: Vec<(usize, RgbImage)> = Vec::new();
+        for (k, p) in people.iter().enumerate() {
+            self.check()?;
+            let o = self.observer(p, EyePosition::default())?;
+            let (s, pic) = self.reference.score_observer(&format!("person_{k}"), &o, self.l);
+            if (k as u32) < options.saved_population_views {
+                kept.push((k, pic.clone()));
+            }
+            let worst_so_far = scores.iter().all(|w: &ViewScore| s.legibility > w.legibility);
+            if worst_so_far {
+                kept.retain(|(i, _)| *i != usize::MAX);
+                kept.push((usize::MAX, pic));
+            }
+            scores.push(s);
+            progress((k + 1) as f64 / people.len() as f64);
+        }
+        for (k, pic) in kept {
+            let name = if k == usize::MAX {
+                "population_worst.png".to_string()
+            } else {
+                format!("person_{k}.png")
+            };
+            self.pictures.push((name, pic));
+        }
+        Ok(Some(PopulationSummary::from_scores(scores)))
+    }
+
+    /// The camera attacker: ideal optics, focus swept, several apertures, an RGB sensor with and without a
+    /// narrow filter per projector band; each channel judged alone; its best case is reported.
+    fn camera(&mut self) -> Result<Option<CameraSummary>, EvaluationError> {
+        let (display, options) = (self.display, self.options);
+        if options.camera_focus_d.is_empty() || options.camera_apertures_mm.is_empty() {
+            return Ok(None);
+        }
+        let g = (self.reference.width as u32, self.reference.height as u32);
+        let rgb = coupling(&display.projectors, &camera_rgb()).c;
+        let mut tried = Vec::new();
+        let mut best: Option<(ViewScore, RgbImage)> = None;
+        for &aperture in &options.camera_apertures_mm {
+            for &focus in &options.camera_focus_d {
+                self.check()?;
+                let tr = self
+                    .cache
+                    .get_or_build(
+                        display,
+                        &camera_lens(focus, aperture),
+                        EyePosition::default(),
+                        &self.topts,
+                    )
+                    .map_err(crate::physics::observer::ObserverError::from)?;
+                for (name, c) in camera_channels(&rgb, display.n_bands()) {
+                    let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
+                    let view = cam.view(self.l);
+                    let lum: Vec<f32> = view.chunks_exact(3).map(|p| p[0]).collect();
+                    let label = format!("camera f={focus:+.1}D aperture={aperture}mm {name}");
+                    let s = self.reference.score(&label, &lum, cam.white[0]);
+                    if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
+                        // The attacker's picture: the channel stretched to its own range, shown in grey.
+                        let stretched = stretch_to_unit(&lum);
+                        let pic = RgbImage::from_fn(g.0, g.1, |x, y| {
+                            let b = (stretched[(y * g.0 + x) as usize].clamp(0.0, 1.0) * 255.0) as u8;
+                            Rgb([b, b, b])
+                        });
+                        best = Some((s.clone(), pic));
+                    }
+                    tried.push(s);
+                }
+            }
+        }
+        Ok(best.map(|(b, pic)| {
+            self.pictures.push(("camera_best.png".to_string(), pic));
+            CameraSummary { best: b, tried }
+        }))
+    }
+
+    fn key_sensitivity(&self) -> Result<Option<KeySensitivity>, EvaluationError> {
+        if self.options.key_directions == 0 {
+            return Ok(None);
+        }
+        self.check()?;
+        let ks = KeySensitivityProbe {
+            display: self.display,
+            l: self.l,
+            target: self.target,
+            reference: &self.reference,
+            options: self.options,
+            topts: &self.topts,
+            cache: self.cache,
+            cancel: self.cancel,
+        };
+        Ok(Some(ks.run()?))
+    }
+
+    /// The target's worst legibility on rings of the configured radii, and the largest radius up to which
+    /// the target still reads.
+    fn head_movement(&self, target_readable: bool) -> Result<Option<HeadMovement>, EvaluationError> {
+        let options = self.options;
+        if options.head_offsets_mm.is_empty() {
+            return Ok(None);
+        }
+        let mut worst = Vec::new();
+        for &r in &options.head_offsets_mm {
+            self.check()?;
+            let mut w = f64::INFINITY;
+            for eye in head_ring(r) {
+                let o = self.observer(self.target, eye)?;
+                w = w.min(self.reference.score_observer("target moved", &o, self.l).0.legibility);
+            }
+            worst.push(w);
+        }
+        let mut radius = 0.0;
+        if target_readable {
+            for (r, w) in options.head_offsets_mm.iter().zip(&worst) {
+                if *w >= options.threshold {
+                    radius = *r;
+                } else {
+                    break;
+                }
+            }
+        }
+        Ok(Some(HeadMovement {
+            offsets_mm: options.head_offsets_mm.clone(),
+            worst_legibility: worst,
+            readable_radius_mm: radius,
+        }))
+    }
 }
 
 #[cfg(test)]

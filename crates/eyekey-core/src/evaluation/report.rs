@@ -47,6 +47,29 @@ pub struct PopulationSummary {
     pub people: Vec<ViewScore>,
 }
 
+impl PopulationSummary {
+    /// The summary of every sampled person's score.
+    pub fn from_scores(scores: Vec<ViewScore>) -> Self {
+        let mut legs: Vec<f64> = scores.iter().map(|s| s.legibility).collect();
+        legs.sort_by(|a, b| a.total_cmp(b));
+        let readable = scores.iter().filter(|s| s.readable).count() as u32;
+        let fraction = |t: f64| legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64;
+        Self {
+            count: scores.len() as u32,
+            readable_count: readable,
+            readable_fraction: readable as f64 / scores.len().max(1) as f64,
+            median_legibility: percentile(&legs, 0.5),
+            p95_legibility: percentile(&legs, 0.95),
+            max_legibility: legs.last().copied().unwrap_or(0.0),
+            fraction_at_or_above: [0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6]
+                .iter()
+                .map(|&t| (t, fraction(t)))
+                .collect(),
+            people: scores,
+        }
+    }
+}
+
 /// The camera attacker's best case.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]

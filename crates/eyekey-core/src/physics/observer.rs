@@ -38,16 +38,18 @@ pub struct Observer {
 }
 
 impl Observer {
-    /// Builds the observer for `profile` at `eye`.
+    /// Builds the observer for `profile` at `eye`, taking its transport operator from `cache` (built and
+    /// stored there if absent).
     pub fn new(
         display: &DisplayGeometry,
         profile: &VisionProfile,
         eye: EyePosition,
         options: &TransportOptions,
+        cache: &TransportCache,
     ) -> Result<Self, ObserverError> {
         profile.validate()?;
         let wavefront = profile.effective_wavefront()?;
-        Self::from_parts(display, &wavefront, &profile.cone_fundamentals(), eye, options)
+        Self::from_parts(display, &wavefront, &profile.cone_fundamentals(), eye, options, cache)
     }
 
     /// Builds an observer from a wavefront at the viewing pupil and cone fundamentals.
@@ -57,8 +59,9 @@ impl Observer {
         cones: &ConeFundamentals,
         eye: EyePosition,
         options: &TransportOptions,
+        cache: &TransportCache,
     ) -> Result<Self, ObserverError> {
-        let transport = TransportCache::global().get_or_build(display, wavefront, eye, options)?;
+        let transport = cache.get_or_build(display, wavefront, eye, options)?;
         let c = coupling(&display.projectors, cones);
         Ok(Self::with_coupling(transport, c.c, display.l_max))
     }

@@ -6,7 +6,7 @@ use crate::physics::zernike::ZernikeCoefficients;
 #[allow(unused_imports)]
 use super::*;
 
-/// A process-wide cache of transport operators, keyed by everything that determines them (display geometry,
+/// A cache of transport operators, keyed by everything that determines them (display geometry,
 /// wavefront, eye position, options), bounded in memory; least recently used entries are evicted first.
 pub struct TransportCache {
     inner: std::sync::Mutex<CacheInner>,
@@ -22,10 +22,9 @@ pub(crate) struct CacheInner {
 }
 
 impl TransportCache {
-    /// The process-wide cache (512 MiB unless [`Self::set_capacity_bytes`] says otherwise).
-    pub fn global() -> &'static TransportCache {
-        static CACHE: std::sync::OnceLock<TransportCache> = std::sync::OnceLock::new();
-        CACHE.get_or_init(|| TransportCache::new(512 << 20))
+    /// A cache that keeps nothing: every request builds its operator (benchmarks, one-off commands).
+    pub fn disabled() -> Self {
+        Self::new(0)
     }
 
     /// An empty cache holding at most `capacity_bytes` of operators.
@@ -106,3 +105,13 @@ impl TransportCache {
         Ok(m)
     }
 }
+
+impl Default for TransportCache {
+    /// A cache of [`DEFAULT_CAPACITY_BYTES`].
+    fn default() -> Self {
+        Self::new(DEFAULT_CAPACITY_BYTES)
+    }
+}
+
+/// Memory bound of [`TransportCache::default`]: 512 MiB, a few dozen paper-preset operators.
+pub const DEFAULT_CAPACITY_BYTES: usize = 512 << 20;

@@ -22,7 +22,7 @@ mod kernels;
 mod rng;
 mod trace;
 
-pub use cache::TransportCache;
+pub use cache::{TransportCache, DEFAULT_CAPACITY_BYTES};
 pub use csr::CsrMatrix;
 pub use grid::{EyePosition, RetinalGrid, TransportOptions};
 use kernels::spmv_fused;
