@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 
+use eyekey_core::encoding::options::{Ablation, DecoyKind, Method};
 use eyekey_core::imaging;
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
@@ -133,7 +134,7 @@ pub struct EncodeArgs {
     pub decoy: Option<PathBuf>,
     /// What decoy observers see: noise, grey or image.
     #[arg(long, value_enum)]
-    pub decoy_kind: Option<DecoyArg>,
+    pub decoy_kind: Option<DecoyKind>,
     /// Decoy observers sampled from the population.
     #[arg(long)]
     pub population_decoys: Option<u32>,
@@ -148,10 +149,10 @@ pub struct EncodeArgs {
     pub document: PathBuf,
     /// Encoder.
     #[arg(long, value_enum, default_value = "multiplex")]
-    pub method: MethodArg,
+    pub method: Method,
     /// Ablation: optical or spectral.
     #[arg(long, value_enum)]
-    pub ablation: Option<AblationArg>,
+    pub ablation: Option<Ablation>,
     /// Solver iteration cap.
     #[arg(long)]
     pub max_iterations: Option<u32>,
@@ -179,37 +180,6 @@ pub struct EncodeArgs {
     /// Output bundle directory (must not exist).
     #[arg(long)]
     pub out: PathBuf,
-}
-
-/// Encoder names on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum MethodArg {
-    /// Eq. 14 with K observers.
-    Multiplex,
-    /// Eq. 16.
-    Diffmax,
-    /// Both.
-    Combined,
-}
-
-/// Ablations on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum AblationArg {
-    /// Optical key only.
-    Optical,
-    /// Spectral key only.
-    Spectral,
-}
-
-/// Decoy kinds on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum DecoyArg {
-    /// Random high-contrast mask.
-    Noise,
-    /// Mid grey.
-    Grey,
-    /// The --decoy image.
-    Image,
 }
 
 /// Options of `eyekey evaluate`.
@@ -368,7 +338,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(a) => simulate(&a)?,
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
-        Command::Bench(a) => bench(&a)?,
+        Command::Bench(a) => crate::research::bench::run(&a)?,
         Command::Serve(args) => {
             init_tracing();
             let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
@@ -505,7 +475,7 @@ fn progress_bar(label: &str) -> indicatif::ProgressBar {
 }
 
 fn encode(a: &EncodeArgs) -> Result<()> {
-    use eyekey_core::encoding::pipeline::{Ablation, DecoyKind, EncodeOptions, JobSpec, Method};
+    use eyekey_core::encoding::pipeline::{EncodeOptions, JobSpec};
     if a.out.exists() {
         bail!("--out {} already exists; choose a new directory", a.out.display());
     }
@@ -516,20 +486,12 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     let decoy = a.decoy.as_deref().map(imaging::load_image).transpose()?;
     let d = EncodeOptions::default();
     let options = EncodeOptions {
-        method: match a.method {
-            MethodArg::Multiplex => Method::Multiplex,
-            MethodArg::Diffmax => Method::Diffmax,
-            MethodArg::Combined => Method::Combined,
-        },
-        ablation: a.ablation.map(|x| match x {
-            AblationArg::Optical => Ablation::Optical,
-            AblationArg::Spectral => Ablation::Spectral,
-        }),
+        method: a.method,
+        ablation: a.ablation,
         population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
         decoy: match (a.decoy_kind, &decoy) {
-            (Some(DecoyArg::Noise), _) => DecoyKind::Noise,
-            (Some(DecoyArg::Grey), _) => DecoyKind::Grey,
-            (Some(DecoyArg::Image), _) | (None, Some(_)) => DecoyKind::Image,
+            (Some(kind), _) => kind,
+            (None, Some(_)) => DecoyKind::Image,
             (None, None) => d.decoy,
         },
         decoy_weight: a.decoy_weight.unwrap_or(d.decoy_weight),
@@ -645,104 +607,6 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         );
     }
     println!("wrote {}", a.out.join("report.json").display());
-    Ok(())
-}
-
-fn bench(a: &BenchArgs) -> Result<()> {
-    use crate::research::bench::*;
-    let display = DisplayGeometry::preset(&a.preset)?;
-    let all = a.section == "all";
-    if !["all", "transport", "solver", "encode"].contains(&a.section.as_str()) {
-        bail!(
-            "--section must be transport, solver, encode or all, got {:?}",
-            a.section
-        );
-    }
-    let cmd = format!(
-        "eyekey bench --preset {} --sub-rays {} --section {}",
-        a.preset, a.sub_rays, a.section
-    );
-    let stamp = chrono::Utc::now().format("%Y-%m-%d %H:%M UTC");
-    if all || a.section == "transport" {
-        let body = format!(
-            "Measured {stamp} by `{cmd}` (release build):\n\n{}",
-            transport_bench(&display, a.sub_rays)?
-        );
-        print!("{body}");
-        write_section(&a.out, "transport", &body)?;
-    }
-    if all || a.section == "solver" {
-        let mut body = format!(
-            "Measured {stamp} by `{cmd}` (release build). Time and iterations to reach an objective within 1e-3 \
-             (relative) of the optimum found by a 1500-iteration, 1e-9-tolerance run from the same start.\n\n\
-             | problem | observers | unknowns | optimum f* | iterations to 1e-3 | time to 1e-3 | ms / iteration | peak memory |\n\
-             | --- | --- | --- | --- | --- | --- | --- | --- |\n"
-        );
-        for k in [2usize, 8] {
-            let problem = BenchProblem::new(&display, k, a.sub_rays)?;
-            if k == 2 {
-                if let Some(dir) = &a.export {
-                    problem.export(dir)?;
-                    let (row, f_star, secs) = solver_bench(&problem, &format!("{} multiplex", a.preset))?;
-                    body.push_str(&row);
-                    std::fs::write(
-                        dir.join("eyekey_result.json"),
-                        serde_json::to_string_pretty(&serde_json::json!({"f_star": f_star, "seconds_to_1e-3": secs}))?,
-                    )?;
-                    continue;
-                }
-            }
-            body.push_str(&solver_bench(&problem, &format!("{} multiplex", a.preset))?.0);
-        }
-        print!("{body}");
-        write_section(&a.out, "solver", &body)?;
-    }
-    if all || a.section == "encode" {
-        use eyekey_core::encoding::pipeline::{EncodeOptions, JobSpec};
-        let cache = TransportCache::disabled();
-        let g = (display.holes_x * 4, display.holes_y * 4);
-        let spec = JobSpec {
-            display: display.clone(),
-            target: VisionProfile::perfect(),
-            target_label: "bench".into(),
-            observers: eyekey_core::physics::population::sample_population(1, 3, Default::default()),
-            document: eyekey_core::imaging::glyphs::render_text(&["PIN", "4821"], g.0, g.1, (g.0 / 32).max(1)),
-            decoy: None,
-            options: EncodeOptions {
-                population_decoys: 0,
-                sub_rays: a.sub_rays,
-                ..Default::default()
-            },
-        };
-        let dir = tempfile::tempdir()?;
-        let cancel = std::sync::atomic::AtomicBool::new(false);
-        let t = std::time::Instant::now();
-        let encoded = eyekey_core::encoding::pipeline::encode(&spec, &cache, &|_| {}, &cancel)?;
-        let t_solve = t.elapsed().as_secs_f64();
-        eyekey_core::encoding::pipeline::write_outputs(
-            &spec,
-            &encoded,
-            &dir.path().join("bundle"),
-            false,
-            &cache,
-            &|_| {},
-            &cancel,
-        )?;
-        let total = t.elapsed().as_secs_f64();
-        let body = format!(
-            "Measured {stamp} by `{cmd}` (release build, transport cache disabled: a cold start).\n\n\
-             | quantity | value |\n| --- | --- |\n\
-             | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
-             | of which transport + solve | {t_solve:.2} s ({} iterations, {}) |\n\
-             | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
-            encoded.solver.iterations,
-            encoded.solver.termination,
-            total - t_solve,
-            peak_memory_bytes() as f64 / 1e6
-        );
-        print!("{body}");
-        write_section(&a.out, "encode", &body)?;
-    }
     Ok(())
 }
 

@@ -1,5 +1,5 @@
-//! `eyekey bench`: figures for the transport operator, the sparse kernels and the solver, printed and written
-//! to a Markdown file. Not a test: nothing here asserts on time.
+//! `eyekey bench`: figures for the transport operator, the sparse kernels, the solver and a whole encode,
+//! printed and written to a Markdown file ([`run`]). Not a test: nothing here asserts on time.
 
 use eyekey_core::physics::transport::TransportCache;
 use std::fmt::Write as _;
@@ -8,10 +8,13 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 
+use super::table_header;
+use crate::cli::BenchArgs;
 use eyekey_core::encoding::objectives::{noise_decoy, MultiplexObjective, Term};
+use eyekey_core::encoding::pipeline::{self, EncodeOptions, JobSpec};
 use eyekey_core::encoding::solver::{minimise, Objective, SolverOptions};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::Observer;
@@ -60,6 +63,7 @@ pub fn streaming_read_gbps() -> f64 {
     (n * 4) as f64 / best / 1e9
 }
 
+/// The best (shortest) wall time of `reps` runs of `f`, seconds.
 fn time_best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
     let mut best = f64::INFINITY;
     for _ in 0..reps {
@@ -70,20 +74,37 @@ fn time_best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
     best
 }
 
-/// Runs the transport/kernel benchmark on a display; returns Markdown lines.
-pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<String> {
-    let mut out = String::new();
-    let bw = streaming_read_gbps();
+/// The benchmark's eye: a perfect eye with some defocus, coma and spherical aberration.
+fn bench_wavefront() -> Result<eyekey_core::physics::zernike::ZernikeCoefficients> {
     let mut p = VisionProfile::perfect();
     p.zernike_um[4] = 0.3;
     p.zernike_um[7] = 0.15;
     p.zernike_um[12] = 0.1;
-    let w = p.effective_wavefront()?;
+    Ok(p.effective_wavefront()?)
+}
+
+/// Timings of one transport operator: its build and the forward and adjoint kernels, with their compulsory
+/// memory traffic.
+struct KernelTimes {
+    /// Seconds to build T (best of 3).
+    build: f64,
+    /// Seconds for A·L (best of 20).
+    forward: f64,
+    /// Seconds for Aᵀ·y (best of 20).
+    adjoint: f64,
+    /// Bytes A·L must move: the matrix once, the input vector once, the output once.
+    forward_bytes: f64,
+    /// Bytes Aᵀ·y must move.
+    adjoint_bytes: f64,
+}
+
+/// Builds the operator (best of 3; the first run also pays page faults) and times its kernels.
+fn time_kernels(display: &DisplayGeometry, sub_rays: u32) -> Result<(TransportMatrix, KernelTimes)> {
+    let w = bench_wavefront()?;
     let opts = TransportOptions {
         sub_rays,
         ..Default::default()
     };
-    // Build (best of 3; the first run also pays page faults).
     let mut t_matrix = None;
     let build = time_best(3, || {
         t_matrix = Some(TransportMatrix::build(display, &w, EyePosition::default(), &opts).expect("valid preset"))
@@ -94,15 +115,40 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
     let l: Vec<f32> = (0..t.n_samples() * n).map(|i| (i % 13) as f32 / 13.0).collect();
     let mut y = vec![0f32; t.n_pixels() * 3];
     let mut x = vec![0f32; t.n_samples() * n];
-    let fwd = time_best(20, || t.forward_lms(&l, &coupling, &mut y));
-    let adj = time_best(20, || t.adjoint_lms(&y, &coupling, &mut x));
+    let forward = time_best(20, || t.forward_lms(&l, &coupling, &mut y));
+    let adjoint = time_best(20, || t.adjoint_lms(&y, &coupling, &mut x));
     // Compulsory traffic: the matrix (indptr, indices, values) once, the input vector once, the output once.
     let matrix_bytes = |m: &eyekey_core::physics::transport::CsrMatrix| (m.indptr.len() * 4 + m.nnz() * 8) as f64;
-    let fwd_bytes = matrix_bytes(&t.forward) + (l.len() * 4) as f64 + (y.len() * 4) as f64;
-    let adj_bytes = matrix_bytes(&t.adjoint) + (y.len() * 4) as f64 + (x.len() * 4) as f64;
+    let times = KernelTimes {
+        build,
+        forward,
+        adjoint,
+        forward_bytes: matrix_bytes(&t.forward) + (l.len() * 4) as f64 + (y.len() * 4) as f64,
+        adjoint_bytes: matrix_bytes(&t.adjoint) + (y.len() * 4) as f64 + (x.len() * 4) as f64,
+    };
+    Ok((t, times))
+}
+
+/// Runs the transport/kernel benchmark on a display; returns Markdown lines.
+pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<String> {
+    let bw = streaming_read_gbps();
+    let (t, times) = time_kernels(display, sub_rays)?;
+    transport_table(display, sub_rays, bw, &t, &times)
+}
+
+/// The transport benchmark's `| quantity | value |` table.
+fn transport_table(
+    display: &DisplayGeometry,
+    sub_rays: u32,
+    bw: f64,
+    t: &TransportMatrix,
+    times: &KernelTimes,
+) -> Result<String> {
+    let mut out = table_header(&["quantity", "value"]);
+    let n = display.n_bands();
     let traced = t.stats.sub_rays_traced as f64;
-    writeln!(out, "| quantity | value |")?;
-    writeln!(out, "| --- | --- |")?;
+    let build = times.build;
+    let (fwd, adj) = (times.forward, times.adjoint);
     writeln!(
         out,
         "| display | {}×{} holes, {}×{} views, {} bands ({} unknowns) |",
@@ -136,15 +182,15 @@ pub fn transport_bench(display: &DisplayGeometry, sub_rays: u32) -> Result<Strin
         out,
         "| A·L (all {n} bands + coupling) | {:.2} ms, {:.2} GB/s effective = {:.0} % of streaming |",
         fwd * 1e3,
-        fwd_bytes / fwd / 1e9,
-        100.0 * fwd_bytes / fwd / 1e9 / bw
+        times.forward_bytes / fwd / 1e9,
+        100.0 * times.forward_bytes / fwd / 1e9 / bw
     )?;
     writeln!(
         out,
         "| Aᵀ·y | {:.2} ms, {:.2} GB/s effective = {:.0} % of streaming |",
         adj * 1e3,
-        adj_bytes / adj / 1e9,
-        100.0 * adj_bytes / adj / 1e9 / bw
+        times.adjoint_bytes / adj / 1e9,
+        100.0 * times.adjoint_bytes / adj / 1e9 / bw
     )?;
     writeln!(
         out,
@@ -343,4 +389,153 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
         ),
     };
     std::fs::write(path, new).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The benchmark sections `eyekey bench --section` accepts besides `all`, in the order they run.
+const SECTIONS: [&str; 3] = ["transport", "solver", "encode"];
+
+/// What every section of one `eyekey bench` run shares.
+struct BenchRun<'a> {
+    args: &'a BenchArgs,
+    display: DisplayGeometry,
+    /// When the figures were measured (UTC, to the minute).
+    stamp: String,
+    /// The command line that reproduces the figures.
+    cmd: String,
+}
+
+/// `eyekey bench`: runs the selected sections; each prints its Markdown and replaces its section of `args.out`.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let display = DisplayGeometry::preset(&args.preset)?;
+    let all = args.section == "all";
+    if !all && !SECTIONS.contains(&args.section.as_str()) {
+        bail!(
+            "--section must be transport, solver, encode or all, got {:?}",
+            args.section
+        );
+    }
+    let run = BenchRun {
+        args,
+        display,
+        stamp: chrono::Utc::now().format("%Y-%m-%d %H:%M UTC").to_string(),
+        cmd: format!(
+            "eyekey bench --preset {} --sub-rays {} --section {}",
+            args.preset, args.sub_rays, args.section
+        ),
+    };
+    for name in SECTIONS {
+        if all || args.section == name {
+            let body = match name {
+                "transport" => run.transport()?,
+                "solver" => run.solver()?,
+                _ => run.encode()?,
+            };
+            print!("{body}");
+            write_section(&args.out, name, &body)?;
+        }
+    }
+    Ok(())
+}
+
+impl BenchRun<'_> {
+    /// The `transport` section: operator build and kernel figures.
+    fn transport(&self) -> Result<String> {
+        Ok(format!(
+            "Measured {} by `{}` (release build):\n\n{}",
+            self.stamp,
+            self.cmd,
+            transport_bench(&self.display, self.args.sub_rays)?
+        ))
+    }
+
+    /// The `solver` section: one row per problem size (2 and 8 observers); the 2-observer problem is also
+    /// exported, with eyekey's result, when `--export` is given.
+    fn solver(&self) -> Result<String> {
+        let mut body = format!(
+            "Measured {} by `{}` (release build). Time and iterations to reach an objective within 1e-3 \
+             (relative) of the optimum found by a 1500-iteration, 1e-9-tolerance run from the same start.\n\n",
+            self.stamp, self.cmd
+        );
+        body.push_str(&table_header(&[
+            "problem",
+            "observers",
+            "unknowns",
+            "optimum f*",
+            "iterations to 1e-3",
+            "time to 1e-3",
+            "ms / iteration",
+            "peak memory",
+        ]));
+        let label = format!("{} multiplex", self.args.preset);
+        for k in [2usize, 8] {
+            let problem = BenchProblem::new(&self.display, k, self.args.sub_rays)?;
+            let export = if k == 2 { self.args.export.as_deref() } else { None };
+            if let Some(dir) = export {
+                problem.export(dir)?;
+            }
+            let (row, f_star, secs) = solver_bench(&problem, &label)?;
+            body.push_str(&row);
+            if let Some(dir) = export {
+                std::fs::write(
+                    dir.join("eyekey_result.json"),
+                    serde_json::to_string_pretty(&serde_json::json!({"f_star": f_star, "seconds_to_1e-3": secs}))?,
+                )?;
+            }
+        }
+        Ok(body)
+    }
+
+    /// The 2-observer job the `encode` section times: a PIN slip for a perfect eye, one sampled observer.
+    fn encode_spec(&self) -> JobSpec {
+        let display = &self.display;
+        let g = (display.holes_x * 4, display.holes_y * 4);
+        JobSpec {
+            display: display.clone(),
+            target: VisionProfile::perfect(),
+            target_label: "bench".into(),
+            observers: eyekey_core::physics::population::sample_population(1, 3, Default::default()),
+            document: eyekey_core::imaging::glyphs::render_text(&["PIN", "4821"], g.0, g.1, (g.0 / 32).max(1)),
+            decoy: None,
+            options: EncodeOptions {
+                population_decoys: 0,
+                sub_rays: self.args.sub_rays,
+                ..Default::default()
+            },
+        }
+    }
+
+    /// The `encode` section: a whole cold-start encode (transport, solve, bundle written to a temporary
+    /// directory).
+    fn encode(&self) -> Result<String> {
+        let cache = TransportCache::disabled();
+        let spec = self.encode_spec();
+        let dir = tempfile::tempdir()?;
+        let cancel = AtomicBool::new(false);
+        let t = Instant::now();
+        let encoded = pipeline::encode(&spec, &cache, &|_| {}, &cancel)?;
+        let t_solve = t.elapsed().as_secs_f64();
+        pipeline::write_outputs(
+            &spec,
+            &encoded,
+            &dir.path().join("bundle"),
+            false,
+            &cache,
+            &|_| {},
+            &cancel,
+        )?;
+        let total = t.elapsed().as_secs_f64();
+        Ok(format!(
+            "Measured {} by `{}` (release build, transport cache disabled: a cold start).\n\n{}\
+             | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
+             | of which transport + solve | {t_solve:.2} s ({} iterations, {}) |\n\
+             | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
+            self.stamp,
+            self.cmd,
+            table_header(&["quantity", "value"]),
+            encoded.solver.iterations,
+            encoded.solver.termination,
+            total - t_solve,
+            peak_memory_bytes() as f64 / 1e6
+        ))
+    }
 }

@@ -23,7 +23,7 @@ use image::{GrayImage, Luma, RgbImage};
 use rand::{Rng, SeedableRng};
 
 use eyekey_core::encoding::pipeline::{encode, DecoyKind, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
-use eyekey_core::evaluation::{luminance, Reference, DEFAULT_THRESHOLD};
+use eyekey_core::evaluation::{luminance, stretch_to_unit, Reference, DEFAULT_THRESHOLD};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
 use eyekey_core::physics::population::{sample_person, SamplingScope};
@@ -97,12 +97,9 @@ struct View {
 
 /// The attacker's starting picture: luminance stretched to its own range, upscaled, 8-bit grey.
 fn attacker_picture(lum: &[f32], width: u32, height: u32) -> GrayImage {
-    let (lo, hi) = lum
-        .iter()
-        .fold((f32::MAX, f32::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
-    let span = (hi - lo).max(1e-12);
+    let stretched = stretch_to_unit(lum);
     let small = GrayImage::from_fn(width, height, |x, y| {
-        let v = (lum[(y * width + x) as usize] - lo) / span;
+        let v = stretched[(y * width + x) as usize];
         Luma([(v.clamp(0.0, 1.0) * 255.0).round() as u8])
     });
     image::imageops::resize(
@@ -117,55 +114,134 @@ fn random_pin<R: Rng>(rng: &mut R) -> String {
     format!("{:04}", rng.gen_range(0..10_000u32))
 }
 
-fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<()> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let started = Instant::now();
-    let cache = TransportCache::default();
-    let d = &setup.display;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    // The evaluation's own sub-ray jitter, different from every encoder's.
-    let topts = TransportOptions {
-        sub_rays: setup.view_sub_rays,
-        seed: seed ^ 0xCA11_B8A7,
-        ..Default::default()
-    };
-    let cancel = AtomicBool::new(false);
-    let (gw, gh) = (d.holes_x, d.holes_y);
-    // Two text sizes: digits filling the width but for a margin (2 px per font dot where the grid allows) and
-    // the dense 1 px per dot of the experiments' PIN slips.
-    let big = (gw.saturating_sub(4) / 24).max(1);
-    let scales = if big > 1 { vec![big, 1] } else { vec![1] };
-    let pool: Vec<VisionProfile> = (0..setup.pool.max(1))
-        .map(|_| sample_person(&mut rng, SamplingScope::default()))
-        .collect();
-    let mut views: Vec<View> = Vec::with_capacity(count);
-    let mut csv = String::from("file,text,legibility,ncc,kind\n");
-    let mut push = |views: &mut Vec<View>, v: View| -> Result<()> {
-        let k = views.len();
-        let file = format!("view_{k}.png");
-        attacker_picture(&v.luminance, gw, gh)
-            .save(out_dir.join(&file))
-            .with_context(|| format!("writing {file}"))?;
-        writeln!(csv, "{file},{},{:.6},{:.6},{}", v.text, v.legibility, v.ncc, v.kind)?;
-        views.push(v);
-        Ok(())
-    };
-    let score = |doc: &RgbImage, o: &Observer, l: &[f32]| -> (f64, f64, Vec<f32>) {
-        let g = o.transport.grid;
-        let reference = Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
-        let lum = luminance(&o.view(l));
-        let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
-        let s = reference.score("", &lum, white);
-        (s.legibility, s.ncc, lum)
-    };
+/// Writes the views as they come: `view_<k>.png` each, and the lines of `views.csv`.
+struct ViewWriter<'a> {
+    out_dir: &'a Path,
+    /// Retinal grid of the views.
+    width: u32,
+    height: u32,
+    /// Views written so far.
+    written: usize,
+    csv: String,
+}
 
-    // Plain display, sampled people with an uncorrected defocus (more of them near focus).
-    let n_plain = if count >= 2 { count / 4 } else { 0 };
-    for k in 0..n_plain {
-        let pin = random_pin(&mut rng);
-        let scale = scales[k % scales.len()];
-        let doc = pin_document(&pin, gw, gh, scale);
-        let mut person = sample_person(&mut rng, SamplingScope::default());
+impl<'a> ViewWriter<'a> {
+    fn new(out_dir: &'a Path, width: u32, height: u32) -> Self {
+        Self {
+            out_dir,
+            width,
+            height,
+            written: 0,
+            csv: String::from("file,text,legibility,ncc,kind\n"),
+        }
+    }
+
+    /// Saves the view's attacker picture as the next `view_<k>.png` and adds its line to the table.
+    fn push(&mut self, v: View) -> Result<()> {
+        let file = format!("view_{}.png", self.written);
+        attacker_picture(&v.luminance, self.width, self.height)
+            .save(self.out_dir.join(&file))
+            .with_context(|| format!("writing {file}"))?;
+        writeln!(
+            self.csv,
+            "{file},{},{:.6},{:.6},{}",
+            v.text, v.legibility, v.ncc, v.kind
+        )?;
+        self.written += 1;
+        Ok(())
+    }
+
+    /// Writes `views.csv`.
+    fn finish(self) -> Result<()> {
+        std::fs::write(self.out_dir.join("views.csv"), self.csv).context("writing views.csv")
+    }
+}
+
+/// Scores what observer `o` sees of light field `l` against `doc`: (legibility, NCC, the view's luminance).
+fn score(doc: &RgbImage, o: &Observer, l: &[f32]) -> (f64, f64, Vec<f32>) {
+    let g = o.transport.grid;
+    let reference = Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+    let lum = luminance(&o.view(l));
+    let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
+    let s = reference.score("", &lum, white);
+    (s.legibility, s.ncc, lum)
+}
+
+/// What every view of one calibration run shares.
+struct Views<'a> {
+    setup: &'a Setup,
+    seed: u64,
+    cache: TransportCache,
+    /// The viewers' transport options: the evaluation's own sub-ray jitter, different from every encoder's.
+    topts: TransportOptions,
+    /// Text sizes, pixels per font dot.
+    scales: Vec<u32>,
+    /// Sampled people who look at the encodings.
+    pool: Vec<VisionProfile>,
+    /// (decoys, weight) combinations of the encodings, visited `stride` apart (a stride coprime to their
+    /// number, so all are visited).
+    combos: Vec<(u32, f64)>,
+    stride: usize,
+    cancel: AtomicBool,
+    started: Instant,
+}
+
+impl<'a> Views<'a> {
+    /// Prepares a run; draws the viewing pool from `rng`.
+    fn new(setup: &'a Setup, seed: u64, rng: &mut impl Rng) -> Self {
+        let started = Instant::now();
+        let topts = TransportOptions {
+            sub_rays: setup.view_sub_rays,
+            seed: seed ^ 0xCA11_B8A7,
+            ..Default::default()
+        };
+        // Two text sizes: digits filling the width but for a margin (2 px per font dot where the grid allows)
+        // and the dense 1 px per dot of the experiments' PIN slips.
+        let big = (setup.display.holes_x.saturating_sub(4) / 24).max(1);
+        let scales = if big > 1 { vec![big, 1] } else { vec![1] };
+        let pool = (0..setup.pool.max(1))
+            .map(|_| sample_person(&mut *rng, SamplingScope::default()))
+            .collect();
+        let combos: Vec<(u32, f64)> = setup
+            .decoys
+            .iter()
+            .flat_map(|&k| setup.weights.iter().map(move |&w| (k, w)))
+            .collect();
+        let stride = (combos.len() / 3 + 1..combos.len())
+            .find(|s| gcd(*s, combos.len()) == 1)
+            .unwrap_or(1);
+        Self {
+            setup,
+            seed,
+            cache: TransportCache::default(),
+            topts,
+            scales,
+            pool,
+            combos,
+            stride,
+            cancel: AtomicBool::new(false),
+            started,
+        }
+    }
+
+    /// A viewer's operator on the display.
+    fn observer(&self, person: &VisionProfile) -> Result<Observer> {
+        Ok(Observer::new(
+            &self.setup.display,
+            person,
+            EyePosition::default(),
+            &self.topts,
+            &self.cache,
+        )?)
+    }
+
+    /// View `k` of the plain display: a sampled person with an uncorrected defocus (more of them near focus).
+    fn plain_view(&self, k: usize, rng: &mut impl Rng) -> Result<View> {
+        let d = &self.setup.display;
+        let pin = random_pin(rng);
+        let scale = self.scales[k % self.scales.len()];
+        let doc = pin_document(&pin, d.holes_x, d.holes_y, scale);
+        let mut person = sample_person(&mut *rng, SamplingScope::default());
         let u: f64 = rng.gen_range(-1.0..=1.0);
         let defocus = 2.0 * u * u.abs();
         person.prescription = Some(Prescription {
@@ -173,48 +249,25 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
             cylinder_d: 0.0,
             axis_deg: 0.0,
         });
-        let o = Observer::new(d, &person, EyePosition::default(), &topts, &cache)?;
-        let (legibility, ncc, lum) = score(&doc, &o, &plain_light_field_for_image(d, &doc));
+        let o = self.observer(&person)?;
+        let (legibility, ncc, luminance) = score(&doc, &o, &plain_light_field_for_image(d, &doc));
         let kind = format!(
             "plain defocus={defocus:+.2}D pupil={:.1}mm scale={scale}",
             person.pupil_diameter_mm
         );
-        push(
-            &mut views,
-            View {
-                text: pin,
-                legibility,
-                ncc,
-                kind,
-                luminance: lum,
-            },
-        )?;
+        Ok(View {
+            text: pin,
+            legibility,
+            ncc,
+            kind,
+            luminance,
+        })
     }
 
-    // Encoded documents: (decoys, weight) combinations visited in a spread-out order.
-    let combos: Vec<(u32, f64)> = setup
-        .decoys
-        .iter()
-        .flat_map(|&k| setup.weights.iter().map(move |&w| (k, w)))
-        .collect();
-    let stride = (combos.len() / 3 + 1..combos.len())
-        .find(|s| gcd(*s, combos.len()) == 1)
-        .unwrap_or(1);
-    let mut e = 0usize;
-    while views.len() < count {
-        let (decoys, weight) = combos[(e * stride) % combos.len()];
-        let scale = scales[(e / combos.len() + e) % scales.len()];
-        let pin = random_pin(&mut rng);
-        let doc = pin_document(&pin, gw, gh, scale);
-        let target = sample_person(
-            &mut rng,
-            SamplingScope {
-                pupil_spread: false,
-                ..Default::default()
-            },
-        );
+    /// Encodes document `doc` for `target` with `decoys` noise decoys of `weight` (view set `e`).
+    fn encode(&self, e: usize, doc: &RgbImage, target: &VisionProfile, decoys: u32, weight: f64) -> Result<Vec<f32>> {
         let spec = JobSpec {
-            display: d.clone(),
+            display: self.setup.display.clone(),
             target: target.clone(),
             target_label: "calibration".into(),
             observers: vec![],
@@ -224,24 +277,29 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
                 population_decoys: decoys,
                 decoy: DecoyKind::Noise,
                 decoy_weight: weight,
-                seed: seed.wrapping_mul(1000).wrapping_add(e as u64),
-                sub_rays: setup.sub_rays,
-                max_iterations: setup.max_iterations,
+                seed: self.seed.wrapping_mul(1000).wrapping_add(e as u64),
+                sub_rays: self.setup.sub_rays,
+                max_iterations: self.setup.max_iterations,
                 evaluation_population: 0,
                 ..Default::default()
             },
         };
-        let t = Instant::now();
-        let enc =
-            encode(&spec, &cache, &|_| {}, &cancel).map_err(|err| anyhow::anyhow!("encoding view set {e}: {err}"))?;
-        let l = &enc.light_field;
-        let tag = format!("decoys={decoys} weight={weight} scale={scale}");
-        let mut batch: Vec<(String, Observer)> = Vec::new();
-        batch.push((
-            format!("target {tag}"),
-            Observer::new(d, &target, EyePosition::default(), &topts, &cache)?,
-        ));
-        for c in 0..setup.cameras_per_encoding {
+        let enc = encode(&spec, &self.cache, &|_| {}, &self.cancel)
+            .map_err(|err| anyhow::anyhow!("encoding view set {e}: {err}"))?;
+        Ok(enc.light_field)
+    }
+
+    /// The viewers of view set `e`, labelled: its target, camera-like eyes (the first in focus, the others
+    /// focused at random within ±1 D), then people from the pool.
+    fn viewers(
+        &self,
+        e: usize,
+        target: &VisionProfile,
+        tag: &str,
+        rng: &mut impl Rng,
+    ) -> Result<Vec<(String, Observer)>> {
+        let mut batch: Vec<(String, Observer)> = vec![(format!("target {tag}"), self.observer(target)?)];
+        for c in 0..self.setup.cameras_per_encoding {
             let focus = if c == 0 { 0.0 } else { rng.gen_range(-1.0..=1.0) };
             let camera = VisionProfile {
                 pupil_diameter_mm: 4.0,
@@ -252,33 +310,47 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
                 }),
                 ..VisionProfile::perfect()
             };
-            let o = Observer::new(d, &camera, EyePosition::default(), &topts, &cache)?;
-            batch.push((format!("camera focus={focus:+.2}D {tag}"), o));
+            batch.push((format!("camera focus={focus:+.2}D {tag}"), self.observer(&camera)?));
         }
-        for i in 0..setup.people_per_encoding {
-            let p = &pool[(e * setup.people_per_encoding + i) % pool.len()];
-            batch.push((
-                format!("person {tag}"),
-                Observer::new(d, p, EyePosition::default(), &topts, &cache)?,
-            ));
+        let per = self.setup.people_per_encoding;
+        for i in 0..per {
+            let p = &self.pool[(e * per + i) % self.pool.len()];
+            batch.push((format!("person {tag}"), self.observer(p)?));
         }
+        Ok(batch)
+    }
+
+    /// View set `e`: a random PIN encoded for a sampled target with the set's (decoys, weight), written as seen
+    /// by each of its viewers until `count` views exist.
+    fn view_set(&self, e: usize, out: &mut ViewWriter, count: usize, rng: &mut impl Rng) -> Result<()> {
+        let d = &self.setup.display;
+        let (decoys, weight) = self.combos[(e * self.stride) % self.combos.len()];
+        let scale = self.scales[(e / self.combos.len() + e) % self.scales.len()];
+        let pin = random_pin(rng);
+        let doc = pin_document(&pin, d.holes_x, d.holes_y, scale);
+        let scope = SamplingScope {
+            pupil_spread: false,
+            ..Default::default()
+        };
+        let target = sample_person(&mut *rng, scope);
+        let t = Instant::now();
+        let l = self.encode(e, &doc, &target, decoys, weight)?;
+        let tag = format!("decoys={decoys} weight={weight} scale={scale}");
         let mut legs = Vec::new();
-        for (kind, o) in batch {
-            if views.len() >= count {
+        for (kind, o) in self.viewers(e, &target, &tag, rng)? {
+            if out.written >= count {
                 break;
             }
-            let (legibility, ncc, lum) = score(&doc, &o, l);
+            let (legibility, ncc, luminance) = score(&doc, &o, &l);
             legs.push(legibility);
-            push(
-                &mut views,
-                View {
-                    text: pin.clone(),
-                    legibility,
-                    ncc,
-                    kind,
-                    luminance: lum,
-                },
-            )?;
+            let text = pin.clone();
+            out.push(View {
+                text,
+                legibility,
+                ncc,
+                kind,
+                luminance,
+            })?;
         }
         eprintln!(
             "view set {e}: {tag}: target {:.2}, others {} ({:.1} s; {} views, {:.0} s total)",
@@ -289,13 +361,30 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
                 .collect::<Vec<_>>()
                 .join(" "),
             t.elapsed().as_secs_f64(),
-            views.len(),
-            started.elapsed().as_secs_f64()
+            out.written,
+            self.started.elapsed().as_secs_f64()
         );
+        Ok(())
+    }
+}
+
+/// Writes `count` views with `setup`: a quarter plain (when `count` ≥ 2), the rest of encodings, view set
+/// after view set.
+fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<()> {
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let views = Views::new(setup, seed, &mut rng);
+    let mut out = ViewWriter::new(out_dir, setup.display.holes_x, setup.display.holes_y);
+    let n_plain = if count >= 2 { count / 4 } else { 0 };
+    for k in 0..n_plain {
+        out.push(views.plain_view(k, &mut rng)?)?;
+    }
+    let mut e = 0usize;
+    while out.written < count {
+        views.view_set(e, &mut out, count, &mut rng)?;
         e += 1;
     }
-    std::fs::write(out_dir.join("views.csv"), csv).context("writing views.csv")?;
-    Ok(())
+    out.finish()
 }
 
 fn gcd(a: usize, b: usize) -> usize {

@@ -4,3 +4,9 @@
 pub mod bench;
 pub mod calibration;
 pub mod experiment;
+
+/// The head of a Markdown table: the column names and the `| --- |` rule, each line ending in a newline.
+pub(crate) fn table_header(columns: &[&str]) -> String {
+    let rule = vec!["---"; columns.len()];
+    format!("| {} |\n| {} |\n", columns.join(" | "), rule.join(" | "))
+}

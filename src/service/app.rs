@@ -154,7 +154,7 @@ impl Application {
 
         let signal_shutdown = shutdown.clone();
         tokio::spawn(async move {
-            wait_for_signal().await;
+            stop_signal().await;
             tracing::info!("shutdown signal received");
             signal_shutdown.shutdown();
         });
@@ -215,7 +215,9 @@ fn router(state: AppState) -> Router {
         .with_state(state)
 }
 
-async fn wait_for_signal() {
+/// Completes on Ctrl-C, or SIGTERM on Unix (what `docker stop` sends). The service and the display client
+/// both stop on it.
+pub async fn stop_signal() {
     let ctrl_c = async {
         if tokio::signal::ctrl_c().await.is_err() {
             std::future::pending::<()>().await;

@@ -1,4 +1,4 @@
-//! `eyekey serve`: the networked service (DESIGN §5).
+//! `eyekey serve`: the networked service (docs/design.md §6).
 //!
 //! REST + JSON under `/v1` with an OpenAPI document (`/openapi.json`, Swagger UI at `/docs`); SQLite
 //! (WAL) with embedded migrations; vision profiles sealed under a master key; a durable job queue in the

@@ -30,7 +30,7 @@ impl JobEvent {
         Self {
             job_id: row.id.clone(),
             display_id: row.display_id.clone(),
-            state: row.job_state(),
+            state: row.state,
             progress: row.progress,
         }
     }

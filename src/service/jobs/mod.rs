@@ -13,6 +13,7 @@
 
 pub mod bundle;
 
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -76,8 +77,8 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<Job
     }
     let now = store::now_ms();
     for row in store::jobs::fail_exhausted(&state.writer, now).await? {
-        tracing::warn!(job = %row.id, state = %row.state, "lease expired with no attempts left");
-        metrics::counter!("eyekey_jobs_finished_total", "state" => row.state.clone()).increment(1);
+        tracing::warn!(job = %row.id, state = %row.state.as_str(), "lease expired with no attempts left");
+        metrics::counter!("eyekey_jobs_finished_total", "state" => row.state.as_str()).increment(1);
         state.publish(&row);
     }
     let Some(job) = store::jobs::claim_next(&state.writer, &state.instance_id, state.config.queue.lease, now).await?
@@ -112,11 +113,32 @@ enum Stop {
     LostLease,
 }
 
+/// What the solver thread hands back: the evaluation report and the sealed bundle's files.
+struct Solved {
+    evaluation: serde_json::Value,
+    files: Vec<bundle::BundleFile>,
+}
+
+/// A running solver and the flags it shares with the async side.
+struct Solver {
+    handle: tokio::task::JoinHandle<Result<Solved, PipelineError>>,
+    cancel: Arc<AtomicBool>,
+    progress: Arc<AtomicU64>,
+    started: Instant,
+}
+
+/// How a supervised attempt ended: the solver's result (or its panic), why it was stopped, and how long
+/// it ran.
+struct Finished {
+    outcome: Result<Result<Solved, PipelineError>, tokio::task::JoinError>,
+    stop: Stop,
+    elapsed: Duration,
+}
+
 /// Runs a job this worker has just claimed (its `attempts` is this attempt's number).
 pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()> {
     state.publish(&job);
     let attempt = job.attempts;
-    let lease = state.config.queue.lease;
     tracing::info!(job = %job.id, attempt, "job started");
     let spec = match load_spec(state, &job).await {
         Ok(spec) => spec,
@@ -124,136 +146,234 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         Err(LoadError::Transient(e)) => return retry_or_fail(state, &job, &format!("{e:#}")).await,
     };
     // Renew the lease once before solving: it may have been cancelled, or lost, while claimed or loading.
-    match store::jobs::heartbeat(&state.writer, &job.id, attempt, lease, 0.0).await? {
+    match store::jobs::heartbeat(&state.writer, &job.id, attempt, state.config.queue.lease, 0.0).await? {
         None => return Ok(()),
         Some(true) => return end(state, &job, JobState::Cancelled, None).await,
         Some(false) => {}
     }
+    let tmp = prepare_temp_dir(state, &job).await?;
+    let solver = spawn_solver(state, spec, &tmp);
+    let finished = supervise(state, &job, solver).await;
+    finalise(state, &job, tmp, finished).await
+}
 
-    let jobs_dir = state.data_dir().join("jobs");
-    let tmp = jobs_dir.join(format!(".tmp-{}-{}", job.id, attempt));
-    let final_dir = jobs_dir.join(&job.id);
+/// Creates this attempt's empty output directory, `<data>/jobs/.tmp-<job>-<attempt>/` (clearing one a
+/// crashed run of the same attempt left behind).
+async fn prepare_temp_dir(state: &AppState, job: &JobRow) -> anyhow::Result<PathBuf> {
+    let tmp = state
+        .data_dir()
+        .join("jobs")
+        .join(format!(".tmp-{}-{}", job.id, job.attempts));
     if tokio::fs::try_exists(&tmp).await.unwrap_or(false) {
         tokio::fs::remove_dir_all(&tmp).await?;
     }
     tokio::fs::create_dir_all(&tmp).await?;
+    Ok(tmp)
+}
 
+/// Starts the pipeline on a blocking thread, writing into `tmp` and sealing the bundle when done.
+fn spawn_solver(state: &AppState, spec: JobSpec, tmp: &Path) -> Solver {
     let cancel = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(AtomicU64::new(0f64.to_bits()));
     let started = Instant::now();
-    let mut solver = tokio::task::spawn_blocking({
-        let (cancel, progress, tmp) = (cancel.clone(), progress.clone(), tmp.clone());
+    let handle = tokio::task::spawn_blocking({
+        let (cancel, progress, tmp) = (cancel.clone(), progress.clone(), tmp.to_path_buf());
         let cache = state.transport_cache.clone();
-        move || -> Result<(serde_json::Value, Vec<bundle::BundleFile>), PipelineError> {
+        move || -> Result<Solved, PipelineError> {
             let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
             let output = run_job(&spec, &tmp, &cache, &report, &cancel)?;
             let files = bundle::seal_bundle(&tmp).map_err(|e| PipelineError::internal("writing the bundle", e))?;
             let evaluation = serde_json::to_value(&output.evaluation)
                 .map_err(|e| PipelineError::internal("recording the evaluation", e))?;
-            Ok((evaluation, files))
+            Ok(Solved { evaluation, files })
         }
     });
+    Solver {
+        handle,
+        cancel,
+        progress,
+        started,
+    }
+}
 
+/// Waits for the solver while renewing the lease and recording progress, and asks it to stop on a
+/// cancel request, a lost lease or shutdown.
+async fn supervise(state: &AppState, job: &JobRow, solver: Solver) -> Finished {
+    let Solver {
+        mut handle,
+        cancel,
+        progress,
+        started,
+    } = solver;
     // Each tick renews the lease and records progress: every third of the lease, and at least twice a
     // second so progress streams stay lively (one small UPDATE per tick).
-    let tick = (lease / 3).clamp(Duration::from_millis(20), Duration::from_millis(500));
+    let tick = (state.config.queue.lease / 3).clamp(Duration::from_millis(20), Duration::from_millis(500));
     let mut heartbeat = tokio::time::interval(tick);
     heartbeat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut shutdown = state.shutdown.clone();
-    let mut stop = Stop::None;
-    let mut published_progress = 0.0;
+    let mut watch = Watch {
+        stop: Stop::None,
+        published_progress: 0.0,
+    };
     let outcome = loop {
         tokio::select! {
-            r = &mut solver => break r,
-            _ = heartbeat.tick() => {
-                let p = f64::from_bits(progress.load(Ordering::Relaxed));
-                match store::jobs::heartbeat(&state.writer, &job.id, attempt, lease, p).await {
-                    Ok(Some(cancel_requested)) => {
-                        if cancel_requested && stop == Stop::None {
-                            stop = Stop::Cancel;
-                            cancel.store(true, Ordering::Relaxed);
-                        }
-                        if p - published_progress >= 0.005 {
-                            published_progress = p;
-                            let mut row = job.clone();
-                            (row.state, row.progress) = ("running".into(), p);
-                            state.publish(&row);
-                        }
-                    }
-                    Ok(None) => {
-                        tracing::warn!(job = %job.id, attempt, "lost the lease; abandoning this attempt");
-                        stop = Stop::LostLease;
-                        cancel.store(true, Ordering::Relaxed);
-                    }
-                    // A failed heartbeat is retried on the next tick; the lease has slack for that.
-                    Err(e) => tracing::warn!(job = %job.id, error = %e, "heartbeat failed"),
-                }
-            }
-            _ = crate::service::state::stopped(&mut shutdown), if stop == Stop::None => {
-                stop = Stop::Shutdown;
+            r = &mut handle => break r,
+            _ = heartbeat.tick() => watch.beat(state, job, &progress, &cancel).await,
+            _ = crate::service::state::stopped(&mut shutdown), if watch.stop == Stop::None => {
+                watch.stop = Stop::Shutdown;
                 cancel.store(true, Ordering::Relaxed);
             }
         }
     };
-    let elapsed = started.elapsed();
+    Finished {
+        outcome,
+        stop: watch.stop,
+        elapsed: started.elapsed(),
+    }
+}
 
-    let discard = |dir: std::path::PathBuf| async move {
-        if let Err(e) = tokio::fs::remove_dir_all(&dir).await {
-            tracing::warn!(dir = %dir.display(), error = %e, "could not remove a job's temporary output");
-        }
-    };
-    match (outcome, stop) {
-        (_, Stop::LostLease) => discard(tmp).await,
-        (Ok(Ok((evaluation, files))), _) => {
-            if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
-                // Left by an earlier attempt that renamed its output but died before recording it.
-                tokio::fs::remove_dir_all(&final_dir).await?;
+/// What the supervisor remembers between heartbeats.
+struct Watch {
+    stop: Stop,
+    published_progress: f64,
+}
+
+impl Watch {
+    /// One heartbeat: renews the lease with the current progress, forwards a cancel request or a lost
+    /// lease to the solver, and publishes progress once it has moved by half a percent.
+    async fn beat(&mut self, state: &AppState, job: &JobRow, progress: &AtomicU64, cancel: &AtomicBool) {
+        let p = f64::from_bits(progress.load(Ordering::Relaxed));
+        match store::jobs::heartbeat(&state.writer, &job.id, job.attempts, state.config.queue.lease, p).await {
+            Ok(Some(cancel_requested)) => {
+                if cancel_requested && self.stop == Stop::None {
+                    self.stop = Stop::Cancel;
+                    cancel.store(true, Ordering::Relaxed);
+                }
+                if p - self.published_progress >= 0.005 {
+                    self.published_progress = p;
+                    let mut row = job.clone();
+                    (row.state, row.progress) = (JobState::Running, p);
+                    state.publish(&row);
+                }
             }
-            tokio::fs::rename(&tmp, &final_dir).await?;
-            let success = store::jobs::Success {
-                evaluation_summary: summarise(&evaluation),
-                bundle_path: format!("jobs/{}", job.id),
-                bundle_files: serde_json::to_string(&files)?,
-                solve_ms: elapsed.as_millis() as i64,
-            };
-            if store::jobs::mark_succeeded(&state.writer, &job.id, attempt, &success).await? {
-                metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded")
-                    .record(elapsed.as_secs_f64());
-                metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded").increment(1);
-                tracing::info!(job = %job.id, attempt, seconds = elapsed.as_secs_f64(), "job succeeded");
-                publish_current(state, &job.id).await;
-            } else {
-                tracing::warn!(job = %job.id, attempt, "finished after losing the job; result dropped");
+            Ok(None) => {
+                tracing::warn!(job = %job.id, attempt = job.attempts, "lost the lease; abandoning this attempt");
+                self.stop = Stop::LostLease;
+                cancel.store(true, Ordering::Relaxed);
             }
-        }
-        (Ok(Err(_)) | Err(_), Stop::Shutdown) => {
-            discard(tmp).await;
-            store::jobs::requeue(&state.writer, &job.id, attempt, None, true).await?;
-            tracing::info!(job = %job.id, "shutting down: job re-queued");
-            publish_current(state, &job.id).await;
-        }
-        (Ok(Err(_)), Stop::Cancel) | (Ok(Err(PipelineError::Cancelled)), _) => {
-            discard(tmp).await;
-            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "cancelled")
-                .record(elapsed.as_secs_f64());
-            end(state, &job, JobState::Cancelled, None).await?;
-        }
-        (Ok(Err(e @ PipelineError::Invalid { .. })), _) => {
-            discard(tmp).await;
-            end(state, &job, JobState::Failed, Some(&e.to_string())).await?;
-        }
-        (Ok(Err(e)), _) => {
-            discard(tmp).await;
-            metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "error").record(elapsed.as_secs_f64());
-            retry_or_fail(state, &job, &e.to_string()).await?;
-        }
-        (Err(join_error), _) => {
-            discard(tmp).await;
-            tracing::error!(job = %job.id, error = %join_error, "the encoder panicked");
-            retry_or_fail(state, &job, "the encoder crashed (internal error)").await?;
+            // A failed heartbeat is retried on the next tick; the lease has slack for that.
+            Err(e) => tracing::warn!(job = %job.id, error = %e, "heartbeat failed"),
         }
     }
+}
+
+/// How an attempt ended, decided from the solver's result and why it was stopped.
+enum Outcome {
+    /// The lease was lost: another worker owns the job now; record nothing.
+    Abandoned,
+    Succeeded(Solved),
+    /// Stopped by shutdown: re-queue without counting the attempt.
+    Interrupted,
+    Cancelled,
+    /// The job cannot succeed: fail without retrying.
+    Invalid(PipelineError),
+    /// Another error: retry while attempts remain.
+    Errored(PipelineError),
+    Panicked(tokio::task::JoinError),
+}
+
+impl Outcome {
+    fn of(outcome: Result<Result<Solved, PipelineError>, tokio::task::JoinError>, stop: Stop) -> Self {
+        match (outcome, stop) {
+            (_, Stop::LostLease) => Self::Abandoned,
+            (Ok(Ok(solved)), _) => Self::Succeeded(solved),
+            (Ok(Err(_)) | Err(_), Stop::Shutdown) => Self::Interrupted,
+            (Ok(Err(_)), Stop::Cancel) | (Ok(Err(PipelineError::Cancelled)), _) => Self::Cancelled,
+            (Ok(Err(e @ PipelineError::Invalid { .. })), _) => Self::Invalid(e),
+            (Ok(Err(e)), _) => Self::Errored(e),
+            (Err(join_error), _) => Self::Panicked(join_error),
+        }
+    }
+}
+
+/// Records how the attempt ended. Every outcome but success discards the temporary output first.
+async fn finalise(state: &AppState, job: &JobRow, tmp: PathBuf, finished: Finished) -> anyhow::Result<()> {
+    let outcome = Outcome::of(finished.outcome, finished.stop);
+    if !matches!(outcome, Outcome::Succeeded(_)) {
+        discard(&tmp).await;
+    }
+    let elapsed = finished.elapsed;
+    match outcome {
+        Outcome::Abandoned => Ok(()),
+        Outcome::Succeeded(solved) => finalise_success(state, job, &tmp, solved, elapsed).await,
+        Outcome::Interrupted => requeue_on_shutdown(state, job).await,
+        Outcome::Cancelled => finalise_cancelled(state, job, elapsed).await,
+        Outcome::Invalid(e) => end(state, job, JobState::Failed, Some(&e.to_string())).await,
+        Outcome::Errored(e) => schedule_retry(state, job, &e, elapsed).await,
+        Outcome::Panicked(join_error) => finalise_panic(state, job, &join_error).await,
+    }
+}
+
+/// Removes an attempt's temporary output (a failure is only logged).
+async fn discard(dir: &Path) {
+    if let Err(e) = tokio::fs::remove_dir_all(dir).await {
+        tracing::warn!(dir = %dir.display(), error = %e, "could not remove a job's temporary output");
+    }
+}
+
+/// Moves the output into `<data>/jobs/<job>/` and records the success, fenced by the attempt: a worker
+/// that lost the job meanwhile drops its result.
+async fn finalise_success(
+    state: &AppState,
+    job: &JobRow,
+    tmp: &Path,
+    solved: Solved,
+    elapsed: Duration,
+) -> anyhow::Result<()> {
+    let final_dir = state.data_dir().join("jobs").join(&job.id);
+    if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
+        // Left by an earlier attempt that renamed its output but died before recording it.
+        tokio::fs::remove_dir_all(&final_dir).await?;
+    }
+    tokio::fs::rename(tmp, &final_dir).await?;
+    let success = store::jobs::Success {
+        evaluation_summary: summarise(&solved.evaluation),
+        bundle_path: format!("jobs/{}", job.id),
+        bundle_files: serde_json::to_string(&solved.files)?,
+        solve_ms: elapsed.as_millis() as i64,
+    };
+    if store::jobs::mark_succeeded(&state.writer, &job.id, job.attempts, &success).await? {
+        metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded").record(elapsed.as_secs_f64());
+        metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded").increment(1);
+        tracing::info!(job = %job.id, attempt = job.attempts, seconds = elapsed.as_secs_f64(), "job succeeded");
+        publish_current(state, &job.id).await;
+    } else {
+        tracing::warn!(job = %job.id, attempt = job.attempts, "finished after losing the job; result dropped");
+    }
     Ok(())
+}
+
+/// Puts a job stopped by shutdown back in the queue without counting the attempt.
+async fn requeue_on_shutdown(state: &AppState, job: &JobRow) -> anyhow::Result<()> {
+    store::jobs::requeue(&state.writer, &job.id, job.attempts, None, true).await?;
+    tracing::info!(job = %job.id, "shutting down: job re-queued");
+    publish_current(state, &job.id).await;
+    Ok(())
+}
+
+async fn finalise_cancelled(state: &AppState, job: &JobRow, elapsed: Duration) -> anyhow::Result<()> {
+    metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "cancelled").record(elapsed.as_secs_f64());
+    end(state, job, JobState::Cancelled, None).await
+}
+
+async fn schedule_retry(state: &AppState, job: &JobRow, e: &PipelineError, elapsed: Duration) -> anyhow::Result<()> {
+    metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "error").record(elapsed.as_secs_f64());
+    retry_or_fail(state, job, &e.to_string()).await
+}
+
+async fn finalise_panic(state: &AppState, job: &JobRow, join_error: &tokio::task::JoinError) -> anyhow::Result<()> {
+    tracing::error!(job = %job.id, error = %join_error, "the encoder panicked");
+    retry_or_fail(state, job, "the encoder crashed (internal error)").await
 }
 
 /// The part of the evaluation report stored with the job and shown in every job read: the headline

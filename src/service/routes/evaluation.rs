@@ -34,7 +34,7 @@ async fn output_dir(state: &AppState, id: &Uuid) -> Result<std::path::PathBuf, A
     let job = store::jobs::get(&state.db, &id_text(id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
-    match (job.job_state(), &job.bundle_path) {
+    match (job.state, &job.bundle_path) {
         (JobState::Succeeded, Some(path)) => Ok(state.data_dir().join(path)),
         (s, _) => Err(ApiError::Conflict {
             code: "job_not_succeeded",

@@ -73,9 +73,7 @@ fn frame_job(row: &JobRow) -> FrameJob {
 async fn own_job(state: &AppState, client: &DisplayClient, id: &Uuid) -> Result<JobRow, ApiError> {
     store::jobs::get(&state.db, &id_text(id))
         .await?
-        .filter(|j| {
-            j.display_id == client.display_id && j.job_state() == JobState::Succeeded && j.bundle_path.is_some()
-        })
+        .filter(|j| j.display_id == client.display_id && j.state == JobState::Succeeded && j.bundle_path.is_some())
         .ok_or(ApiError::NotFound("job"))
 }
 

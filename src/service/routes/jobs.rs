@@ -146,7 +146,7 @@ impl TryFrom<&JobRow> for JobView {
         let options: EncodeOptions = serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
         Ok(Self {
             id: parse_id(&r.id),
-            state: r.job_state(),
+            state: r.state,
             progress: r.progress,
             attempts: r.attempts,
             max_attempts: r.max_attempts,
@@ -234,16 +234,48 @@ pub async fn create_job(
     if body.observer_profile_ids.len() > 16 {
         return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
-    // The canonical request (options filled in) identifies "the same request" for idempotency.
+    let request_hash = request_hash(&body, &options)?;
+    let (target, observers) = resolve_inputs(&state.db, &body).await?;
+    let new = NewJob {
+        id: id_text(&Uuid::new_v4()),
+        display_id: id_text(&body.display_id),
+        document_id: id_text(&body.document_id),
+        decoy_document_id: body.decoy_document_id.as_ref().map(id_text),
+        profile_id: target.id,
+        profile_version: target.current_version,
+        observers: to_json(&observers)?,
+        method: to_json(&options.method)?.trim_matches('"').to_string(),
+        options: to_json(&options)?,
+        max_attempts: state.config.queue.max_attempts.into(),
+        idempotency_key: key,
+        request_hash,
+    };
+    let (status, row) = enqueue(&state, &new).await?;
+    let mut response = (status, Json(JobView::try_from(&row)?)).into_response();
+    if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
+        response.headers_mut().insert(header::LOCATION, location);
+    }
+    Ok(response)
+}
+
+/// The hash of the canonical request (options filled in), which identifies "the same request" for
+/// idempotency.
+fn request_hash(body: &CreateJob, options: &EncodeOptions) -> Result<String, ApiError> {
     let canonical = CreateJob {
         options: Some(options.clone()),
         ..body.clone()
     };
-    let request_hash = hex::encode(Sha256::digest(
+    Ok(hex::encode(Sha256::digest(
         serde_json::to_vec(&canonical).map_err(|e| ApiError::Internal(e.into()))?,
-    ));
+    )))
+}
 
-    let db = &state.db;
+/// Checks that every input of a job creation exists; returns the target profile and the observers
+/// pinned to their current versions.
+async fn resolve_inputs(
+    db: &sqlx::SqlitePool,
+    body: &CreateJob,
+) -> Result<(store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
     store::displays::get(db, &id_text(&body.display_id))
         .await?
         .ok_or_else(|| ApiError::invalid("display_id", "no such display"))?;
@@ -268,43 +300,29 @@ pub async fn create_job(
             version: p.current_version,
         });
     }
-    let new = NewJob {
-        id: id_text(&Uuid::new_v4()),
-        display_id: id_text(&body.display_id),
-        document_id: id_text(&body.document_id),
-        decoy_document_id: body.decoy_document_id.as_ref().map(id_text),
-        profile_id: target.id,
-        profile_version: target.current_version,
-        observers: to_json(&observers)?,
-        method: to_json(&options.method)?.trim_matches('"').to_string(),
-        options: to_json(&options)?,
-        max_attempts: state.config.queue.max_attempts.into(),
-        idempotency_key: key,
-        request_hash,
-    };
-    let (status, row) = match store::jobs::enqueue(&state.writer, &new).await? {
+    Ok((target, observers))
+}
+
+/// Enqueues a job, or finds the one this idempotency key already created: `201` and the new job (audited,
+/// published and handed to a worker), `200` and the existing one, or a conflict when the key was used
+/// for a different request.
+async fn enqueue(state: &AppState, new: &NewJob) -> Result<(StatusCode, JobRow), ApiError> {
+    match store::jobs::enqueue(&state.writer, new).await? {
         Enqueued::Created(row) => {
             store::audit::record(&state.writer, OPERATOR, "job.create", &format!("jobs/{}", row.id)).await?;
             state.publish(&row);
             state.job_queued.notify_one();
-            (StatusCode::CREATED, row)
+            Ok((StatusCode::CREATED, row))
         }
-        Enqueued::Existing(row) => (StatusCode::OK, row),
-        Enqueued::KeyReused(row) => {
-            return Err(ApiError::Conflict {
-                code: "idempotency_key_reused",
-                message: format!(
-                    "this Idempotency-Key was used for job {} with a different request",
-                    row.id
-                ),
-            })
-        }
-    };
-    let mut response = (status, Json(JobView::try_from(&row)?)).into_response();
-    if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
-        response.headers_mut().insert(header::LOCATION, location);
+        Enqueued::Existing(row) => Ok((StatusCode::OK, row)),
+        Enqueued::KeyReused(row) => Err(ApiError::Conflict {
+            code: "idempotency_key_reused",
+            message: format!(
+                "this Idempotency-Key was used for job {} with a different request",
+                row.id
+            ),
+        }),
     }
-    Ok(response)
 }
 
 fn to_json<T: Serialize>(v: &T) -> Result<String, ApiError> {
@@ -393,7 +411,7 @@ pub async fn cancel_job(
     let row = store::jobs::request_cancel(&state.writer, &id_text(&id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
-    let status = match row.job_state() {
+    let status = match row.state {
         JobState::Cancelled => StatusCode::OK,
         JobState::Running => StatusCode::ACCEPTED,
         other => {
@@ -450,7 +468,7 @@ struct Follow {
     rx: tokio::sync::broadcast::Receiver<JobEvent>,
     shutdown: tokio::sync::watch::Receiver<bool>,
     /// (state, progress in thousandths, attempts) last sent.
-    last: Option<(String, i64, i64)>,
+    last: Option<(JobState, i64, i64)>,
     done: bool,
 }
 
@@ -470,7 +488,7 @@ impl Follow {
                     return None;
                 }
             };
-            let key = (row.state.clone(), (row.progress * 1000.0).round() as i64, row.attempts);
+            let key = (row.state, (row.progress * 1000.0).round() as i64, row.attempts);
             if self.last.as_ref() != Some(&key) {
                 let kind = if self.last.as_ref().map(|l| &l.0) == Some(&key.0) {
                     "progress"
@@ -478,7 +496,7 @@ impl Follow {
                     "state"
                 };
                 self.last = Some(key);
-                self.done = row.job_state().is_terminal();
+                self.done = row.state.is_terminal();
                 let view = JobView::try_from(&row).ok()?;
                 return Some(Event::default().event(kind).data(serde_json::to_string(&view).ok()?));
             }

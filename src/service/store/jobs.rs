@@ -13,8 +13,9 @@ use sqlx::SqlitePool;
 use super::{now_ms, Cursor, Writer};
 
 /// Where a job is in its life.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
 #[serde(rename_all = "snake_case")]
+#[sqlx(type_name = "TEXT", rename_all = "snake_case")]
 pub enum JobState {
     /// Waiting for a worker.
     Queued,
@@ -124,8 +125,8 @@ pub struct JobRow {
     pub method: String,
     /// `EncodeOptions` JSON.
     pub options: String,
-    /// State name.
-    pub state: String,
+    /// State.
+    pub state: JobState,
     /// Progress 0..=1.
     pub progress: f64,
     /// Claims so far.
@@ -162,13 +163,6 @@ pub struct JobRow {
     pub solve_ms: Option<i64>,
     /// Last change.
     pub updated_at: i64,
-}
-
-impl JobRow {
-    /// The parsed state.
-    pub fn job_state(&self) -> JobState {
-        JobState::parse(&self.state).unwrap_or(JobState::Failed)
-    }
 }
 
 const COLUMNS: &str = "id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers, \

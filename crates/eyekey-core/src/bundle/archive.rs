@@ -1,10 +1,8 @@
 //! Zipping a bundle for download.
 
+use crate::bundle::{check_manifest, BundleError, Manifest, Source, MANIFEST_FILE, MAX_MANIFEST_BYTES};
 use std::io::{Seek, Write};
 use std::path::Path;
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Zips the bundle directory `dir` into `out` for download: `manifest.json` first, then the files it lists
 /// in the manifest's order, nothing else. Each file's size and SHA-256 are checked on the way, so a damaged

@@ -1,11 +1,9 @@
 //! Atomic directories: write into a hidden sibling, fsync, rename.
 
+use crate::bundle::{io_err, BundleError};
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// `dir` must be absent or an empty directory.
 pub(crate) fn check_target_dir(dir: &Path) -> Result<(), BundleError> {
@@ -48,20 +46,59 @@ pub(crate) fn split_dir(dir: &Path) -> Result<(PathBuf, String), BundleError> {
 }
 
 pub(crate) fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), BundleError> {
-    let mut f = fs::File::create_new(path).map_err(io_err("create", path))?;
-    f.write_all(bytes).map_err(io_err("write", path))?;
-    f.sync_all().map_err(io_err("sync", path))
+    create_synced(path, bytes).map_err(io_err("write", path))
+}
+
+/// Creates `path` (which must not exist), writes `bytes` and fsyncs the file.
+pub fn create_synced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut f = fs::File::create_new(path)?;
+    f.write_all(bytes)?;
+    f.sync_all()
 }
 
 /// Makes a directory's entries durable (a rename or a new file is only safe once its directory is synced).
-pub(crate) fn sync_dir(dir: &Path) -> Result<(), BundleError> {
+/// A no-op where directories cannot be opened for syncing (not Unix).
+pub fn fsync_dir(dir: &Path) -> std::io::Result<()> {
     #[cfg(unix)]
-    {
-        fs::File::open(dir)
-            .and_then(|d| d.sync_all())
-            .map_err(io_err("sync", dir))?;
-    }
+    fs::File::open(dir)?.sync_all()?;
     #[cfg(not(unix))]
     let _ = dir;
+    Ok(())
+}
+
+pub(crate) fn sync_dir(dir: &Path) -> Result<(), BundleError> {
+    fsync_dir(dir).map_err(io_err("sync", dir))
+}
+
+/// Writes `contents` (name, bytes, ...) as the files of directory `dir`, atomically: everything is written
+/// and fsynced into a fresh hidden sibling (`.<name>.tmp-<random>`), which is then renamed to `dir`. `dir`
+/// must be absent or empty. On any error the temporary directory is removed.
+pub(crate) fn write_dir_atomically<R>(dir: &Path, contents: &[(String, Vec<u8>, R)]) -> Result<(), BundleError> {
+    let (parent, base) = split_dir(dir)?;
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(".{base}.tmp-"))
+        .tempdir_in(&parent)
+        .map_err(io_err("create a temporary directory in", &parent))?;
+    // From here on, returning early drops `tmp`, which removes it and everything in it.
+    for (name, bytes, _) in contents {
+        write_synced(&tmp.path().join(name), bytes)?;
+    }
+    sync_dir(tmp.path())?;
+    fs::rename(tmp.path(), dir).map_err(|source| match source.kind() {
+        // Someone filled `dir` after the check above.
+        std::io::ErrorKind::DirectoryNotEmpty | std::io::ErrorKind::AlreadyExists => BundleError::NotEmpty {
+            path: dir.to_path_buf(),
+        },
+        _ => BundleError::Io {
+            op: "rename the temporary bundle to",
+            path: dir.to_path_buf(),
+            source,
+        },
+    })?;
+    // The directory now lives at `dir`; stop `tmp` from trying to remove its old path.
+    let _ = tmp.keep();
+    // Best effort: the files are complete and in place; failing now would report an error for a directory
+    // that exists (and a retry would then hit `NotEmpty`).
+    let _ = sync_dir(&parent);
     Ok(())
 }

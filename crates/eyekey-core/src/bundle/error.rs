@@ -1,9 +1,7 @@
 //! Why a bundle could not be written, read or zipped.
 
+use crate::bundle::MANIFEST_FILE;
 use std::path::{Path, PathBuf};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Why a bundle could not be written, read or zipped. Every message names the file and the problem.
 #[derive(Debug, thiserror::Error)]
@@ -14,7 +12,6 @@ pub enum BundleError {
     Io {
         /// What was being done ("read", "create", "rename", ...).
         op: &'static str,
-        /// The path.
         path: PathBuf,
         /// The cause.
         source: std::io::Error,
@@ -73,16 +70,10 @@ pub enum BundleError {
     },
     /// A file name that is not a plain name inside the bundle directory.
     #[error("{name:?} is not a plain file name (no '/', '\\', ':', '..', control characters or leading '.')")]
-    UnsafeName {
-        /// The name.
-        name: String,
-    },
+    UnsafeName { name: String },
     /// A file name used twice, or one that clashes with a name the bundle reserves.
     #[error("{name:?} appears twice in the bundle or clashes with a file the bundle writes itself")]
-    DuplicateName {
-        /// The name.
-        name: String,
-    },
+    DuplicateName { name: String },
     /// A file is larger than the reader accepts.
     #[error("{name}: larger than the limit of {limit} bytes")]
     TooLarge {

@@ -3,9 +3,6 @@
 use crate::physics::display::DisplayGeometry;
 use serde::{Deserialize, Serialize};
 
-#[allow(unused_imports)]
-use super::*;
-
 /// The contents of `manifest.json`: everything needed to show and to audit a bundle.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {

@@ -2,7 +2,7 @@
 //!
 //! A bundle is a directory, or a `.zip` of one, holding
 //! - one 16-bit greyscale PNG per projector, `frame_<n>.png`, of (X·U)×(Y·V) pixels with
-//!   pixel (x·U+i, y·V+j) = round(L(x, y, i, j, n)/L_max·65535) (DESIGN §2);
+//!   pixel (x·U+i, y·V+j) = round(L(x, y, i, j, n)/L_max·65535) (docs/design.md §2);
 //! - the barrier mask, `barrier_mask.png`, 8-bit grey, 255 = open ([`DisplayGeometry::barrier_mask`]);
 //! - any extra files the caller adds (an evaluation report, say);
 //! - `manifest.json` ([`Manifest`]): format version, display geometry with its projector spectra and L_max,
@@ -26,6 +26,7 @@ mod write;
 
 pub use archive::*;
 use atomic::*;
+pub use atomic::{create_synced, fsync_dir};
 pub use error::*;
 pub use manifest::*;
 pub use read::*;
@@ -170,7 +171,7 @@ mod tests {
 
     #[test]
     fn frames_put_each_sample_at_its_documented_pixel() {
-        // DESIGN §2: pixel (x·U+i, y·V+j) of frame n is L(x, y, i, j, n)/L_max.
+        // docs/design.md §2: pixel (x·U+i, y·V+j) of frame n is L(x, y, i, j, n)/L_max.
         let root = tempfile::tempdir().unwrap();
         let dir = root.path().join("b");
         let (d, l, _) = write_small(&dir);

@@ -1,14 +1,16 @@
 //! Reading and verifying a bundle from a directory or a zip.
 
+use crate::bundle::{
+    check_plain_name, geometry, io_err, sha256_hex, BundleError, FileEntry, FileRole, Manifest, FORMAT_VERSION,
+    MANIFEST_FILE, MASK_FILE, MAX_BUNDLE_BYTES, MAX_FILE_BYTES, MAX_MANIFEST_BYTES, MAX_MASK_PIXELS,
+    MAX_MASK_PIXELS_PER_HOLE,
+};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, DynamicImage, ImageDecoder};
 use std::collections::HashSet;
 use std::fs;
 use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Reads the bundle at `path`, a directory or a `.zip` of one (the files at the archive's top level).
 ///
@@ -103,6 +105,24 @@ pub(crate) fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
             ),
         });
     }
+    check_files(m)?;
+    check_geometry(m)?;
+    let layout = roles_of(m)?;
+    let d = &m.display;
+    let k = m.barrier_mask_pixels_per_hole;
+    if !(1..=MAX_MASK_PIXELS_PER_HOLE).contains(&k)
+        || d.holes_x as u64 * d.holes_y as u64 * k as u64 * k as u64 > MAX_MASK_PIXELS
+    {
+        return Err(geometry(format!(
+            "barrier_mask_pixels_per_hole = {k} must be within 1..={MAX_MASK_PIXELS_PER_HOLE} and give at most \
+             {MAX_MASK_PIXELS} pixels"
+        )));
+    }
+    Ok(layout)
+}
+
+/// Every listed name is plain and listed once; sizes stay within the limits.
+fn check_files(m: &Manifest) -> Result<(), BundleError> {
     let mut names = HashSet::new();
     names.insert(MANIFEST_FILE);
     let mut total = 0u64;
@@ -128,6 +148,11 @@ pub(crate) fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
         });
     }
 
+    Ok(())
+}
+
+/// The display validates and agrees with the frame size and count.
+fn check_geometry(m: &Manifest) -> Result<(), BundleError> {
     let d = &m.display;
     d.validate()
         .map_err(|e| geometry(format!("{MANIFEST_FILE}: display: {e}")))?;
@@ -145,6 +170,12 @@ pub(crate) fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
             d.n_bands()
         )));
     }
+    Ok(())
+}
+
+/// Where each frame and the mask sit in the file list: exactly one frame per band and one mask.
+fn roles_of(m: &Manifest) -> Result<Layout, BundleError> {
+    let d = &m.display;
     let mut frames = vec![None; d.n_bands()];
     let mut mask = None;
     for (i, entry) in m.files.iter().enumerate() {
@@ -179,15 +210,6 @@ pub(crate) fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
     let mask = mask.ok_or_else(|| BundleError::Manifest {
         reason: "no barrier mask is listed".to_string(),
     })?;
-    let k = m.barrier_mask_pixels_per_hole;
-    if !(1..=MAX_MASK_PIXELS_PER_HOLE).contains(&k)
-        || d.holes_x as u64 * d.holes_y as u64 * k as u64 * k as u64 > MAX_MASK_PIXELS
-    {
-        return Err(geometry(format!(
-            "barrier_mask_pixels_per_hole = {k} must be within 1..={MAX_MASK_PIXELS_PER_HOLE} and give at most \
-             {MAX_MASK_PIXELS} pixels"
-        )));
-    }
     Ok(Layout { frames, mask })
 }
 

@@ -1,15 +1,16 @@
 //! Writing a bundle atomically.
 
+use crate::bundle::{
+    check_plain_name, check_target_dir, frame_file_name, geometry, sha256_hex, write_dir_atomically, BundleError,
+    BundleMeta, FileEntry, FileRole, Manifest, FORMAT_VERSION, MANIFEST_FILE, MASK_FILE, MAX_BUNDLE_BYTES,
+    MAX_FILE_BYTES, MAX_MASK_PIXELS, MAX_MASK_PIXELS_PER_HOLE,
+};
 use crate::imaging::grey16;
 use crate::physics::display::DisplayGeometry;
 use image::{DynamicImage, ImageFormat};
 use std::collections::HashSet;
-use std::fs;
 use std::io::Cursor;
 use std::path::Path;
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Writes a bundle for light field `l` (band-interleaved: `l[p * n_bands + n]` for sample p in
 /// [`DisplayGeometry::sample_index`] order and band n, values in [0, L_max]) into the directory `dir`.
@@ -34,6 +35,30 @@ pub fn write_bundle(
     extra_files: &[(String, Vec<u8>)],
     mask_pixels_per_hole: u32,
 ) -> Result<Manifest, BundleError> {
+    check_inputs(display, l, extra_files, mask_pixels_per_hole)?;
+    check_target_dir(dir)?;
+    // Encode before touching the disk: a failure here leaves nothing to clean up.
+    let mut contents = encode_files(display, l, extra_files, mask_pixels_per_hole)?;
+    let manifest = manifest_for(display, meta, &contents, mask_pixels_per_hole);
+    let mut manifest_json = serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
+        reason: format!("cannot serialise: {e}"),
+    })?;
+    manifest_json.push(b'\n');
+    contents.push((MANIFEST_FILE.to_string(), manifest_json, FileRole::Other));
+    write_dir_atomically(dir, &contents)?;
+    Ok(manifest)
+}
+
+/// A bundle file before it is written: name, bytes, role.
+type Content = (String, Vec<u8>, FileRole);
+
+/// Checks the light field's size and values, the mask resolution and the extra files' names and sizes.
+fn check_inputs(
+    display: &DisplayGeometry,
+    l: &[f32],
+    extra_files: &[(String, Vec<u8>)],
+    mask_k: u32,
+) -> Result<(), BundleError> {
     display.validate().map_err(|e| geometry(format!("display: {e}")))?;
     let n_bands = display.n_bands();
     let n_samples = display.n_samples_per_band();
@@ -53,7 +78,6 @@ pub fn write_bundle(
             reason: format!("sample {} of band {} is {}", k / n_bands, k % n_bands, l[k]),
         });
     }
-    let mask_k = mask_pixels_per_hole;
     let mask_pixels = display.holes_x as u64 * display.holes_y as u64 * mask_k as u64 * mask_k as u64;
     if !(1..=MAX_MASK_PIXELS_PER_HOLE).contains(&mask_k) || mask_pixels > MAX_MASK_PIXELS {
         return Err(geometry(format!(
@@ -76,11 +100,19 @@ pub fn write_bundle(
             });
         }
     }
-    check_target_dir(dir)?;
+    Ok(())
+}
 
-    // Encode before touching the disk: a failure here leaves nothing to clean up.
+/// The frames (one 16-bit PNG per band, pixel = L/L_max), the barrier mask and the extra files, encoded.
+fn encode_files(
+    display: &DisplayGeometry,
+    l: &[f32],
+    extra_files: &[(String, Vec<u8>)],
+    mask_k: u32,
+) -> Result<Vec<Content>, BundleError> {
+    let (n_bands, n_samples) = (display.n_bands(), display.n_samples_per_band());
     let (width, height) = display.frame_size();
-    let mut contents: Vec<(String, Vec<u8>, FileRole)> = Vec::with_capacity(n_bands + 1 + extra_files.len());
+    let mut contents: Vec<Content> = Vec::with_capacity(n_bands + 2 + extra_files.len());
     let scale = 1.0 / display.l_max;
     let mut frame = vec![0f32; n_samples];
     for band in 0..n_bands {
@@ -110,14 +142,19 @@ pub fn write_bundle(
             limit: MAX_BUNDLE_BYTES,
         });
     }
+    Ok(contents)
+}
 
-    let manifest = Manifest {
+/// The manifest listing `contents` with their checksums.
+fn manifest_for(display: &DisplayGeometry, meta: &BundleMeta, contents: &[Content], mask_k: u32) -> Manifest {
+    let (width, height) = display.frame_size();
+    Manifest {
         format_version: FORMAT_VERSION,
         created_at: chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true),
         display: display.clone(),
         frame_width: width,
         frame_height: height,
-        n_frames: n_bands as u32,
+        n_frames: display.n_bands() as u32,
         barrier_mask_pixels_per_hole: mask_k,
         profile_label: meta.profile_label.clone(),
         document_sha256: meta.document_sha256.clone(),
@@ -132,40 +169,7 @@ pub fn write_bundle(
                 role: *role,
             })
             .collect(),
-    };
-    let mut manifest_json = serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
-        reason: format!("cannot serialise: {e}"),
-    })?;
-    manifest_json.push(b'\n');
-    contents.push((MANIFEST_FILE.to_string(), manifest_json, FileRole::Other));
-
-    let (parent, base) = split_dir(dir)?;
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{base}.tmp-"))
-        .tempdir_in(&parent)
-        .map_err(io_err("create a temporary directory in", &parent))?;
-    // From here on, returning early drops `tmp`, which removes it and everything in it.
-    for (name, bytes, _) in &contents {
-        write_synced(&tmp.path().join(name), bytes)?;
     }
-    sync_dir(tmp.path())?;
-    fs::rename(tmp.path(), dir).map_err(|source| match source.kind() {
-        // Someone filled `dir` after the check above.
-        std::io::ErrorKind::DirectoryNotEmpty | std::io::ErrorKind::AlreadyExists => BundleError::NotEmpty {
-            path: dir.to_path_buf(),
-        },
-        _ => BundleError::Io {
-            op: "rename the temporary bundle to",
-            path: dir.to_path_buf(),
-            source,
-        },
-    })?;
-    // The directory now lives at `dir`; stop `tmp` from trying to remove its old path.
-    let _ = tmp.keep();
-    // Best effort: the bundle is complete and in place; failing now would report an error for a bundle
-    // that exists (and a retry would then hit `NotEmpty`).
-    let _ = sync_dir(&parent);
-    Ok(manifest)
 }
 
 pub(crate) fn encode_png(name: &str, img: &DynamicImage) -> Result<Vec<u8>, BundleError> {

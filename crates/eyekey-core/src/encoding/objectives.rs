@@ -20,7 +20,6 @@ use crate::physics::observer::Observer;
 
 /// One observer's least-squares term.
 pub struct Term<'a> {
-    /// The observer.
     pub observer: &'a Observer,
     /// What they should see, `[r·3 + a]` LMS.
     pub objective: Vec<f32>,
@@ -67,7 +66,6 @@ impl<'a> MultiplexObjective<'a> {
         }
     }
 
-    /// The terms.
     pub fn terms(&self) -> &[Term<'a>] {
         &self.terms
     }

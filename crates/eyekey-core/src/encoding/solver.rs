@@ -84,7 +84,6 @@ impl std::fmt::Display for Termination {
     }
 }
 
-/// Solver options.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SolverOptions {
     /// Iteration cap.
@@ -122,7 +121,6 @@ pub struct Progress {
     pub objective: f64,
 }
 
-/// The result of a solve.
 #[derive(Clone, Debug)]
 pub struct SolveResult {
     /// The minimiser found (inside the box).
@@ -204,12 +202,9 @@ pub fn minimise(
     let mut x_new = vec![0f32; n];
     let mut grad = vec![0f32; n];
     let mut t = 1.0f64;
-    let mut history = Vec::new();
-    let mut restarts = 0;
-    let mut calm = 0;
+    let (mut history, mut restarts, mut calm, mut iterations) = (Vec::new(), 0, 0, 0);
     let mut termination = Termination::MaxIterations;
     let mut f_x = f64::INFINITY;
-    let mut iterations = 0;
     for k in 0..options.max_iterations {
         if cancel.load(Ordering::Relaxed) {
             termination = Termination::Cancelled;
@@ -224,15 +219,9 @@ pub fn minimise(
         x_new
             .par_iter_mut()
             .zip(y.par_iter().zip(grad.par_iter()))
-            .for_each(|(xn, (yi, gi))| {
-                *xn = project(yi - step * gi);
-            });
+            .for_each(|(xn, (yi, gi))| *xn = project(yi - step * gi));
         // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded.
-        let uphill: f64 = grad
-            .par_iter()
-            .zip(x_new.par_iter().zip(x.par_iter()))
-            .map(|(g, (a, b))| *g as f64 * (*a as f64 - *b as f64))
-            .sum();
+        let uphill = directional(&grad, &x_new, &x);
         let monotone_break = f_y > f_x * (1.0 + 1e-12) && t > 1.0;
         if uphill > 0.0 || monotone_break {
             restarts += 1;
@@ -247,9 +236,7 @@ pub fn minimise(
         let beta = ((t - 1.0) / t_next) as f32;
         y.par_iter_mut()
             .zip(x_new.par_iter().zip(x.par_iter()))
-            .for_each(|(yi, (a, b))| {
-                *yi = project(a + beta * (a - b));
-            });
+            .for_each(|(yi, (a, b))| *yi = project(a + beta * (a - b)));
         std::mem::swap(&mut x, &mut x_new);
         t = t_next;
         iterations = k + 1;
@@ -271,10 +258,9 @@ pub fn minimise(
             calm = 0;
         }
     }
-    let objective = obj.value(&x);
     SolveResult {
+        objective: obj.value(&x),
         x,
-        objective,
         history,
         iterations,
         restarts,
@@ -282,6 +268,14 @@ pub fn minimise(
         termination,
         seconds: start.elapsed().as_secs_f64(),
     }
+}
+
+/// ⟨g, a − b⟩ in f64.
+fn directional(g: &[f32], a: &[f32], b: &[f32]) -> f64 {
+    g.par_iter()
+        .zip(a.par_iter().zip(b.par_iter()))
+        .map(|(g, (a, b))| *g as f64 * (*a as f64 - *b as f64))
+        .sum()
 }
 
 /// Largest violation of the box-constrained first-order (KKT) conditions at x, relative to ‖∇f‖∞:

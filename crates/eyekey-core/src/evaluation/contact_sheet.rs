@@ -1,9 +1,7 @@
 //! The contact sheet: labelled views side by side and the population's legibility plot.
 
+use crate::evaluation::Report;
 use image::{Rgb, RgbImage};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// One PNG with labelled tiles (objective, target, observers, worst person, camera's best) and a bar plot of
 /// the population's legibility against the threshold.

@@ -1,5 +1,6 @@
 //! Key sensitivity: legibility as a viewer's wavefront and cone parameters move away from the target's.
 
+use crate::evaluation::{median, EvaluationError, EvaluationOptions, KeySensitivity, Reference};
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::Observer;
 use crate::physics::profile::VisionProfile;
@@ -8,9 +9,6 @@ use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
 use crate::physics::zernike::ZernikeCoefficients;
 use rand::{Rng, SeedableRng};
 use std::sync::atomic::{AtomicBool, Ordering};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Optical steps along each direction, µm RMS.
 const OPTICAL_STEPS_UM: [f64; 6] = [0.02, 0.05, 0.1, 0.2, 0.4, 0.8];

@@ -4,9 +4,6 @@ use crate::imaging;
 use image::RgbImage;
 use rayon::prelude::*;
 
-#[allow(unused_imports)]
-use super::*;
-
 /// Default legibility threshold: views scoring at or above it are counted as readable.
 /// Calibrated against OCR in `docs/legibility-calibration.md`: the lowest legibility at which tesseract, after
 /// an attacker's enhancements, read any of 400 simulated PIN views (its 50 % point is 0.60). People read some

@@ -1,4 +1,4 @@
-//! Is it actually secret? Fidelity for the target and readability for everybody else (DESIGN §4).
+//! Is it actually secret? Fidelity for the target and readability for everybody else (docs/design.md §4).
 //!
 //! Readability is judged contrast-invariantly: an attacker stretches contrast and denoises, so the score is
 //! the best |normalised cross-correlation| between the document's luminance and the view's luminance after

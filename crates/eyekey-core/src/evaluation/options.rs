@@ -1,9 +1,7 @@
 //! What an evaluation looks at, and how hard.
 
+use crate::evaluation::DEFAULT_THRESHOLD;
 use serde::{Deserialize, Serialize};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Options of an evaluation.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -1,11 +1,9 @@
 //! The document as the evaluation sees it: luminance on the retinal grid at the objective's level.
 
+use crate::evaluation::{image_luminance, legibility, luminance, ncc, psnr, ssim, ViewScore};
 use crate::imaging;
 use crate::physics::observer::Observer;
 use image::RgbImage;
-
-#[allow(unused_imports)]
-use super::*;
 
 /// The document as the evaluation sees it: luminance on the retinal grid and the objective's level.
 pub struct Reference {

@@ -1,10 +1,8 @@
 //! The report: scores of each view, summaries of the population, the camera attacker, the key and head movement; the evaluation's errors.
 
+use crate::evaluation::{percentile, DEFAULT_THRESHOLD};
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Scores of one view.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -1,6 +1,6 @@
 //! Images in and out: documents (sRGB PNG/JPEG) to objective LMS images, simulated LMS views back to sRGB.
 //!
-//! Conventions (DESIGN §2 "Images"): a document is sRGB. The objective for an observer is the LMS image a
+//! Conventions (docs/design.md §2 "Images"): a document is sRGB. The objective for an observer is the LMS image a
 //! standard observer would see of it on an ordinary display, von-Kries adapted to the observer's own display
 //! white (all projectors at L_max) and scaled by a level ≤ 1 that leaves the encoder headroom. A simulated
 //! view is adapted back from the viewer's display white to sRGB white through the standard observer, so the
@@ -28,7 +28,6 @@ pub enum ImagingError {
     /// The file could not be read.
     #[error("cannot read {path}")]
     Io {
-        /// The path.
         path: String,
         /// The cause.
         source: std::io::Error,
@@ -56,7 +55,6 @@ pub enum ImagingError {
     /// Writing failed.
     #[error("cannot write {path}: {reason}")]
     Write {
-        /// The path.
         path: String,
         /// The cause.
         reason: String,

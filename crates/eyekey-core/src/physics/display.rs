@@ -1,6 +1,6 @@
 //! The 5D light-field display (paper §5): a barrier of holes in front of a rear-projected multiband screen.
 //!
-//! Conventions (DESIGN §2): X×Y holes at pitch `hole_pitch_mm` in the barrier plane (z = 0), the screen at
+//! Conventions (docs/design.md §2): X×Y holes at pitch `hole_pitch_mm` in the barrier plane (z = 0), the screen at
 //! distance `gap_mm` behind it. Behind each hole lie U×V screen pixels at pitch `screen_pixel_pitch_mm`; the
 //! pixel at offset (i, j) sends its light through the hole with slope −offset/g (Eq. 13's light field
 //! L(x, y, u, v, n) is the set of N projector frames). The blocks behind the holes are aimed at the design eye
@@ -241,7 +241,7 @@ impl DisplayGeometry {
     /// Centre of screen pixel (i, j) behind hole (x, y), in screen-plane coordinates (mm, same axes).
     ///
     /// The block behind each hole is centred on the line from the design eye position (on axis) through
-    /// the hole: block centre = h·(1 + g/d) (DESIGN §2).
+    /// the hole: block centre = h·(1 + g/d) (docs/design.md §2).
     pub fn screen_pixel_centre_mm(&self, x: u32, y: u32, i: u32, j: u32) -> [f64; 2] {
         let h = self.hole_centre_mm(x, y);
         let aim = 1.0 + self.gap_mm / self.viewing_distance_mm;

@@ -1,4 +1,4 @@
-//! People sampled from published statistics: the "everybody else" of every secrecy claim (DESIGN §4).
+//! People sampled from published statistics: the "everybody else" of every secrecy claim (docs/design.md §4).
 //!
 //! Optics: Indiana Aberration Study (Thibos, Hong, Bradley & Cheng 2002; summary statistics in
 //! `data/thibos2002_ias_zernike_stats.csv`). Orders 3–6 are drawn independently from N(mean, SD) per OSA

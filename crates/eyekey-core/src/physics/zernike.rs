@@ -537,7 +537,7 @@ impl ZernikeCoefficients {
     }
 
     /// Wavefront slope [∂W/∂x, ∂W/∂y] with respect to physical pupil coordinates, (1/r_p)·∂W/∂ρ, in
-    /// µm per mm = mrad (DESIGN §2 "Viewer optics"). For millions of points use [`Self::polynomial`].
+    /// µm per mm = mrad (docs/design.md §2 "Viewer optics"). For millions of points use [`Self::polynomial`].
     pub fn gradient_mrad(&self, x_mm: f64, y_mm: f64) -> [f64; 2] {
         let r = self.pupil_radius_mm();
         let (x, y) = (x_mm / r, y_mm / r);

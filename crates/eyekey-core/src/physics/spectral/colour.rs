@@ -2,9 +2,6 @@
 
 use std::sync::OnceLock;
 
-#[allow(unused_imports)]
-use super::*;
-
 // Colour: sRGB ⇄ linear ⇄ XYZ ⇄ LMS
 
 pub(crate) type Mat3 = [[f64; 3]; 3];

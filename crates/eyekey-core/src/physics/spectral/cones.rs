@@ -1,9 +1,7 @@
 //! Cone fundamentals and the standard observer's (Stockman & Sharpe 2000, 2°).
 
+use crate::physics::spectral::{parse_lms_table, SS_2DEG_CSV};
 use std::sync::OnceLock;
-
-#[allow(unused_imports)]
-use super::*;
 
 // Cone fundamentals
 

@@ -1,10 +1,8 @@
 //! The embedded reference tables (CIE 2006, Stockman & Sharpe, Asano et al. 2016), parsed once.
 
+use crate::physics::spectral::{wavelengths_nm, ConeFundamentals, N_WAVELENGTHS};
 use serde::Deserialize;
 use std::sync::OnceLock;
-
-#[allow(unused_imports)]
-use super::*;
 
 // Embedded reference data (parsed once)
 

@@ -1,7 +1,5 @@
 //! Errors of the spectral model, each naming its field.
-
-#[allow(unused_imports)]
-use super::*;
+use crate::physics::spectral::MIN_POWER_FRACTION_ON_GRID;
 
 // Errors
 

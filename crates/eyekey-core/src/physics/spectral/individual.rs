@@ -1,11 +1,12 @@
 //! Individual observers: the CIE 170-1:2006 physiological model with the eight parameters of Asano et al. (2016).
 
+use crate::physics::spectral::{
+    asano_scaled_sds, check_range, cie2006_templates, wavelengths_nm, ConeFundamentals, SpectralError, N_WAVELENGTHS,
+    WAVELENGTH_START_NM, WAVELENGTH_STEP_NM,
+};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
-
-#[allow(unused_imports)]
-use super::*;
 
 /// Physiological parameters of one observer: the CIE 170-1:2006 age and field size plus the eight
 /// deviations of Asano et al. (2016). The default (age 32, 2° field, all deviations 0) is the CIE

@@ -1,9 +1,10 @@
 //! Projector spectra and the coupling matrix c_na = ∫ E_n x̄_a dλ (paper Eq. 12).
 
+use crate::physics::spectral::{
+    check_range, grid_integral, resample_onto_grid, trapezoid, validate_table, wavelengths_nm, ConeFundamentals,
+    SpectralError, MIN_POWER_FRACTION_ON_GRID, WAVELENGTH_STEP_NM,
+};
 use serde::{Deserialize, Serialize};
-
-#[allow(unused_imports)]
-use super::*;
 
 // Projectors and the coupling matrix (Eq. 12)
 

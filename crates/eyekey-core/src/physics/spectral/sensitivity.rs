@@ -1,9 +1,9 @@
 //! A viewer's spectral sensitivity: standard, individual parameters, or a measured table.
 
+use crate::physics::spectral::{
+    normalise_peak, resample_onto_grid, validate_table, ConeFundamentals, ObserverParameters, SpectralError,
+};
 use serde::{Deserialize, Serialize};
-
-#[allow(unused_imports)]
-use super::*;
 
 // Spectral sensitivity of a viewer
 

@@ -1,7 +1,5 @@
 //! Sampled spectral tables: validation, resampling onto the grid, integration.
-
-#[allow(unused_imports)]
-use super::*;
+use crate::physics::spectral::{check_finite, check_range, wavelengths_nm, SpectralError, WAVELENGTH_STEP_NM};
 
 // Sampled tables
 

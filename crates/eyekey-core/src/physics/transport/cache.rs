@@ -1,10 +1,8 @@
 //! A memory-bounded LRU of transport operators, owned by whoever needs one (the service's state, an experiment).
 
 use crate::physics::display::DisplayGeometry;
+use crate::physics::transport::{EyePosition, TransportError, TransportMatrix, TransportOptions};
 use crate::physics::zernike::ZernikeCoefficients;
-
-#[allow(unused_imports)]
-use super::*;
 
 /// A cache of transport operators, keyed by everything that determines them (display geometry,
 /// wavefront, eye position, options), bounded in memory; least recently used entries are evicted first.

@@ -1,12 +1,8 @@
 //! Compressed-row storage with f32 values and u32 indices, and its transpose.
 
-#[allow(unused_imports)]
-use super::*;
-
 /// A sparse matrix in compressed-row form with f32 values and u32 indices.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CsrMatrix {
-    /// Rows.
     pub n_rows: usize,
     /// Columns.
     pub n_cols: usize,

@@ -2,9 +2,6 @@
 
 use crate::physics::display::DisplayGeometry;
 
-#[allow(unused_imports)]
-use super::*;
-
 /// The grid on which retinal images are sampled, in display-plane coordinates (mm).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RetinalGrid {

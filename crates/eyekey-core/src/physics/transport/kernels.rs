@@ -2,9 +2,6 @@
 
 use rayon::prelude::*;
 
-#[allow(unused_imports)]
-use super::*;
-
 /// Rows per rayon task in the sparse kernels: about eight tasks per thread (enough to balance rows of
 /// uneven length), but never fewer than 64 rows (scheduling must stay cheap).
 pub(crate) fn rows_per_task(n_rows: usize) -> usize {

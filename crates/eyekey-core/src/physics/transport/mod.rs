@@ -1,6 +1,6 @@
 //! Light transport from the display's light field to one observer's retinal image (paper Eqs. 9–11, 13).
 //!
-//! The paper's T is 0/1 per ray (Eq. 10). eyekey makes it physical (DESIGN §2): for every light-field sample
+//! The paper's T is 0/1 per ray (Eq. 10). eyekey makes it physical (docs/design.md §2): for every light-field sample
 //! (hole x, y; view i, j) it traces S sub-rays jittered over the hole aperture and over the screen pixel (the
 //! view's angular bin), drops those that miss the pupil, moves the rest by the wavefront error (Eq. 9,
 //! landing = s + d·∇W(P)), and splats each landing point bilinearly onto a retinal grid expressed in
@@ -70,7 +70,6 @@ pub struct TransportMatrix {
 /// What a transport build traced.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct TransportStats {
-    /// Sub-rays traced.
     pub sub_rays_traced: u64,
     /// Sub-rays that entered the pupil.
     pub sub_rays_in_pupil: u64,

@@ -1,8 +1,5 @@
 //! SplitMix64, the seedable generator of the sub-ray jitter.
 
-#[allow(unused_imports)]
-use super::*;
-
 /// SplitMix64 (Steele, Lea & Flood 2014): a tiny, fast, seedable generator for the sub-ray jitter.
 pub(crate) struct SplitMix64(pub(crate) u64);
 

@@ -1,12 +1,12 @@
 //! The ray tracer that builds T and ∂T/∂W (paper Eqs. 9–11).
 
+use super::rng::SplitMix64;
 use crate::physics::display::DisplayGeometry;
+use crate::physics::transport::{
+    CsrMatrix, EyePosition, RetinalGrid, TransportError, TransportMatrix, TransportOptions, TransportStats,
+};
 use crate::physics::zernike::{ZernikeCoefficients, ZernikePolynomial};
 use rayon::prelude::*;
-
-use super::rng::SplitMix64;
-#[allow(unused_imports)]
-use super::*;
 
 /// One sub-ray's landing point before splatting.
 pub(crate) struct Landing {
@@ -32,6 +32,244 @@ pub(crate) fn bilinear(f: [f64; 2], corner: u8) -> (f64, [f64; 2]) {
     (wx * wy, [dwx * wy, wx * dwy])
 }
 
+/// One hole's traced and splatted light: entries sorted by column, then row.
+struct HoleOut {
+    cols: Vec<u32>,
+    rows: Vec<u32>,
+    w: Vec<f32>,
+    /// ∂w/∂W_j, `n_terms` per entry.
+    dw: Vec<f32>,
+    traced: u64,
+    in_pupil: u64,
+    off_grid: u64,
+}
+
+/// Checks a build's options and eye position; returns the eye's distance from the barrier, mm.
+fn check_options(
+    display: &DisplayGeometry,
+    eye: EyePosition,
+    options: &TransportOptions,
+) -> Result<f64, TransportError> {
+    if options.sub_rays == 0 || options.sub_rays > 1024 {
+        return Err(TransportError::Invalid {
+            field: "sub_rays",
+            reason: format!("must be within 1..=1024, got {}", options.sub_rays),
+        });
+    }
+    if options.retina_oversample == 0 || options.retina_oversample > 8 {
+        return Err(TransportError::Invalid {
+            field: "retina_oversample",
+            reason: format!("must be within 1..=8, got {}", options.retina_oversample),
+        });
+    }
+    let d_eye = display.viewing_distance_mm + eye.dz_mm;
+    if !(d_eye.is_finite() && d_eye > 10.0) {
+        return Err(TransportError::Invalid {
+            field: "eye.dz_mm",
+            reason: format!("the eye would be {d_eye} mm from the barrier"),
+        });
+    }
+    Ok(d_eye)
+}
+
+/// What every hole's trace shares: the geometry, the eye and its wavefront.
+struct Tracer<'a> {
+    display: &'a DisplayGeometry,
+    eye: EyePosition,
+    options: &'a TransportOptions,
+    d_eye: f64,
+    grid: RetinalGrid,
+    r_p: f64,
+    poly: ZernikePolynomial,
+    term_polys: Vec<ZernikePolynomial>,
+    /// Retinal pixels of landing shift per unit of ∂W/∂ρ (µm).
+    shift_per_grad: f64,
+}
+
+impl Tracer<'_> {
+    /// Traces hole `h`'s sub-rays (S per view, jittered over the hole's disc and the screen pixel's square)
+    /// to the pupil; returns the landings of those that enter it, their ∂f/∂W_j (flat, landing × term) and
+    /// the number traced.
+    fn trace_hole(&self, h: usize) -> (Vec<Landing>, Vec<[f64; 2]>, u64) {
+        let display = self.display;
+        let (hx, hy) = ((h as u32) % display.holes_x, (h as u32) / display.holes_x);
+        let centre = display.hole_centre_mm(hx, hy);
+        let mut rng = SplitMix64(self.options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let s = self.options.sub_rays as usize;
+        let views = (display.views_u * display.views_v) as usize;
+        let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
+        let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * self.term_polys.len());
+        let mut traced = 0u64;
+        for j in 0..display.views_v {
+            for i in 0..display.views_u {
+                let q0 = display.screen_pixel_centre_mm(hx, hy, i, j);
+                let col = display.sample_index(hx, hy, i, j) as u32;
+                for _ in 0..s {
+                    traced += 1;
+                    // Uniform point in the hole's disc and in the screen pixel's square.
+                    let rho = 0.5 * display.hole_diameter_mm * rng.next_f64().sqrt();
+                    let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                    let sx = centre[0] + rho * cos;
+                    let sy = centre[1] + rho * sin;
+                    let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                    let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                    if let Some(f) = self.land(sx, sy, qx, qy, &mut dfs) {
+                        landings.push(Landing { col, f });
+                    }
+                }
+            }
+        }
+        (landings, dfs, traced)
+    }
+
+    /// The landing (retinal-grid pixel units) of the ray from screen point q through barrier point s, or
+    /// `None` if the iris stops it; pushes its ∂f/∂W_j onto `dfs`.
+    fn land(&self, sx: f64, sy: f64, qx: f64, qy: f64, dfs: &mut Vec<[f64; 2]>) -> Option<[f64; 2]> {
+        let (d, g) = (self.display, &self.grid);
+        // Slope (u, v) = (s − q)/g; the ray meets the pupil plane at P = s + d·(u, v).
+        let px = sx + self.d_eye * (sx - qx) / d.gap_mm - self.eye.x_mm;
+        let py = sy + self.d_eye * (sy - qy) / d.gap_mm - self.eye.y_mm;
+        let (ux, uy) = (px / self.r_p, py / self.r_p);
+        if ux * ux + uy * uy > 1.0 {
+            return None;
+        }
+        let grad = self.poly.gradient(ux, uy);
+        for tp in &self.term_polys {
+            let gk = tp.gradient(ux, uy);
+            dfs.push([self.shift_per_grad * gk[0], self.shift_per_grad * gk[1]]);
+        }
+        Some([
+            (sx - g.origin_mm[0]) / g.pixel_mm + self.shift_per_grad * grad[0],
+            (sy - g.origin_mm[1]) / g.pixel_mm + self.shift_per_grad * grad[1],
+        ])
+    }
+
+    /// Bilinear splat: one entry per (landing, corner) inside the grid, keyed by (column, row), each landing
+    /// weighted `weight`; returns the entries sorted by key and how many landings fell entirely off the grid.
+    fn splat(&self, landings: &[Landing], weight: f64) -> (Vec<Splat>, u64) {
+        let grid = &self.grid;
+        let mut entries: Vec<Splat> = Vec::with_capacity(landings.len() * 4);
+        let mut off_grid = 0u64;
+        for (li, l) in landings.iter().enumerate() {
+            let (x0, y0) = (l.f[0].floor(), l.f[1].floor());
+            let mut any = false;
+            for corner in 0..4u8 {
+                let (gx, gy) = (x0 as i64 + (corner & 1) as i64, y0 as i64 + (corner >> 1) as i64);
+                if gx < 0 || gy < 0 || gx >= grid.width as i64 || gy >= grid.height as i64 {
+                    continue;
+                }
+                any = true;
+                let row = (gy as u32) * grid.width + gx as u32;
+                let (w, _) = bilinear(l.f, corner);
+                entries.push(Splat {
+                    key: (u64::from(l.col) << 32) | u64::from(row),
+                    w: (weight * w) as f32,
+                    landing: li as u32,
+                    corner,
+                });
+            }
+            if !any {
+                off_grid += 1;
+            }
+        }
+        entries.sort_unstable_by_key(|e| e.key);
+        (entries, off_grid)
+    }
+
+    /// One hole's entries of T and ∂T/∂W_j. Its light is normalised by the sub-rays that entered the pupil
+    /// and spread over k² retinal pixels per hole pitch, so a plain image keeps its intensity.
+    fn hole(&self, h: usize) -> HoleOut {
+        let (landings, dfs, traced) = self.trace_hole(h);
+        let in_pupil = landings.len() as u64;
+        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
+        let weight = if in_pupil > 0 { k2 / in_pupil as f64 } else { 0.0 };
+        let (entries, off_grid) = self.splat(&landings, weight);
+        let n_terms = self.term_polys.len();
+        let mut out = HoleOut {
+            cols: Vec::with_capacity(entries.len()),
+            rows: Vec::with_capacity(entries.len()),
+            w: Vec::with_capacity(entries.len()),
+            dw: Vec::with_capacity(entries.len() * n_terms),
+            traced,
+            in_pupil,
+            off_grid,
+        };
+        let mut last_key = u64::MAX;
+        for e in entries {
+            if e.key != last_key {
+                out.cols.push((e.key >> 32) as u32);
+                out.rows.push(e.key as u32);
+                out.w.push(0.0);
+                out.dw.extend(std::iter::repeat_n(0.0, n_terms));
+                last_key = e.key;
+            }
+            *out.w.last_mut().expect("an entry was pushed") += e.w;
+            if n_terms > 0 {
+                // ∂(wx·wy)/∂W_j = ∂wx/∂fx·wy·∂fx/∂W_j + wx·∂wy/∂fy·∂fy/∂W_j.
+                let l = &landings[e.landing as usize];
+                let (_, dwdf) = bilinear(l.f, e.corner);
+                let base = out.dw.len() - n_terms;
+                let df = &dfs[e.landing as usize * n_terms..(e.landing as usize + 1) * n_terms];
+                for (k, d) in df.iter().enumerate() {
+                    out.dw[base + k] += (weight * (dwdf[0] * d[0] + dwdf[1] * d[1])) as f32;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Assembles Tᵀ (rows = light-field samples) and its derivative values from the per-hole lists.
+fn assemble(
+    holes: &[HoleOut],
+    n_cols: usize,
+    n_rows: usize,
+    n_terms: usize,
+) -> Result<(CsrMatrix, Vec<Vec<f32>>, TransportStats), TransportError> {
+    let nnz: usize = holes.iter().map(|h| h.cols.len()).sum();
+    if nnz >= u32::MAX as usize {
+        return Err(TransportError::TooLarge(nnz));
+    }
+    let mut counts = vec![0u32; n_cols + 1];
+    for h in holes {
+        for &c in &h.cols {
+            counts[c as usize + 1] += 1;
+        }
+    }
+    for i in 0..n_cols {
+        counts[i + 1] += counts[i];
+    }
+    let mut t_indices = vec![0u32; nnz];
+    let mut t_values = vec![0f32; nnz];
+    let mut t_dvalues: Vec<Vec<f32>> = vec![vec![0f32; nnz]; n_terms];
+    let mut next = counts.clone();
+    let mut stats = TransportStats::default();
+    for h in holes {
+        stats.sub_rays_traced += h.traced;
+        stats.sub_rays_in_pupil += h.in_pupil;
+        stats.sub_rays_off_grid += h.off_grid;
+        stats.holes_seen += u64::from(h.in_pupil > 0);
+        for e in 0..h.cols.len() {
+            let c = h.cols[e] as usize;
+            let dst = next[c] as usize;
+            next[c] += 1;
+            t_indices[dst] = h.rows[e];
+            t_values[dst] = h.w[e];
+            for (k, dv) in t_dvalues.iter_mut().enumerate() {
+                dv[dst] = h.dw[e * n_terms + k];
+            }
+        }
+    }
+    let adjoint = CsrMatrix {
+        n_rows: n_cols,
+        n_cols: n_rows,
+        indptr: counts,
+        indices: t_indices,
+        values: t_values,
+    };
+    Ok((adjoint, t_dvalues, stats))
+}
+
 impl TransportMatrix {
     /// Builds T for one observer (wavefront `wavefront`, at `eye`) looking at `display`.
     ///
@@ -42,201 +280,30 @@ impl TransportMatrix {
         eye: EyePosition,
         options: &TransportOptions,
     ) -> Result<Self, TransportError> {
-        if options.sub_rays == 0 || options.sub_rays > 1024 {
-            return Err(TransportError::Invalid {
-                field: "sub_rays",
-                reason: format!("must be within 1..=1024, got {}", options.sub_rays),
-            });
-        }
-        if options.retina_oversample == 0 || options.retina_oversample > 8 {
-            return Err(TransportError::Invalid {
-                field: "retina_oversample",
-                reason: format!("must be within 1..=8, got {}", options.retina_oversample),
-            });
-        }
-        let d_eye = display.viewing_distance_mm + eye.dz_mm;
-        if !(d_eye.is_finite() && d_eye > 10.0) {
-            return Err(TransportError::Invalid {
-                field: "eye.dz_mm",
-                reason: format!("the eye would be {d_eye} mm from the barrier"),
-            });
-        }
+        let d_eye = check_options(display, eye, options)?;
         let grid = RetinalGrid::for_display(display, options.retina_oversample);
         let r_p = wavefront.pupil_radius_mm();
-        let poly = wavefront.polynomial();
-        let term_polys: Vec<ZernikePolynomial> = options
-            .derivative_terms
-            .iter()
-            .map(|&j| ZernikePolynomial::single_term(j))
-            .collect();
-        // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
-        let shift_per_grad = d_eye * 1e-3 / grid.pixel_mm / r_p;
-        let n_holes = (display.holes_x * display.holes_y) as usize;
-        let views = (display.views_u * display.views_v) as usize;
-        let s = options.sub_rays as usize;
-
-        // Trace and splat hole by hole in parallel; each hole's entries are merged per column.
-        struct HoleOut {
-            /// (column, row, weight, dweights...) sorted by column then row.
-            cols: Vec<u32>,
-            rows: Vec<u32>,
-            w: Vec<f32>,
-            dw: Vec<f32>,
-            traced: u64,
-            in_pupil: u64,
-            off_grid: u64,
-        }
-        let n_terms = term_polys.len();
-        let holes: Vec<HoleOut> = (0..n_holes)
-            .into_par_iter()
-            .map(|h| {
-                let (hx, hy) = ((h as u32) % display.holes_x, (h as u32) / display.holes_x);
-                let centre = display.hole_centre_mm(hx, hy);
-                let mut rng = SplitMix64(options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
-                // ∂f/∂W_j per landing, flat: landing index × n_terms.
-                let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * n_terms);
-                let mut traced = 0u64;
-                for j in 0..display.views_v {
-                    for i in 0..display.views_u {
-                        let q0 = display.screen_pixel_centre_mm(hx, hy, i, j);
-                        let col = display.sample_index(hx, hy, i, j) as u32;
-                        for _ in 0..s {
-                            traced += 1;
-                            // Uniform point in the hole's disc and in the screen pixel's square.
-                            let rho = 0.5 * display.hole_diameter_mm * rng.next_f64().sqrt();
-                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
-                            let sx = centre[0] + rho * cos;
-                            let sy = centre[1] + rho * sin;
-                            let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
-                            let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
-                            // Slope (u, v) = (s − q)/g; the ray meets the pupil plane at P = s + d·(u, v).
-                            let px = sx + d_eye * (sx - qx) / display.gap_mm - eye.x_mm;
-                            let py = sy + d_eye * (sy - qy) / display.gap_mm - eye.y_mm;
-                            let (ux, uy) = (px / r_p, py / r_p);
-                            if ux * ux + uy * uy > 1.0 {
-                                continue; // stopped by the iris
-                            }
-                            let g = poly.gradient(ux, uy);
-                            let f = [
-                                (sx - grid.origin_mm[0]) / grid.pixel_mm + shift_per_grad * g[0],
-                                (sy - grid.origin_mm[1]) / grid.pixel_mm + shift_per_grad * g[1],
-                            ];
-                            for tp in &term_polys {
-                                let gk = tp.gradient(ux, uy);
-                                dfs.push([shift_per_grad * gk[0], shift_per_grad * gk[1]]);
-                            }
-                            landings.push(Landing { col, f });
-                        }
-                    }
-                }
-                let in_pupil = landings.len() as u64;
-                // Each hole's light, spread over k² retinal pixels per hole pitch, keeps its intensity.
-                let k2 = (options.retina_oversample * options.retina_oversample) as f64;
-                let weight = if in_pupil > 0 { k2 / in_pupil as f64 } else { 0.0 };
-                // Bilinear splat: one entry per (landing, corner), keyed by (column, row).
-                let mut entries: Vec<Splat> = Vec::with_capacity(landings.len() * 4);
-                let mut off_grid = 0u64;
-                for (li, l) in landings.iter().enumerate() {
-                    let (x0, y0) = (l.f[0].floor(), l.f[1].floor());
-                    let mut any = false;
-                    for corner in 0..4u8 {
-                        let (gx, gy) = (x0 as i64 + (corner & 1) as i64, y0 as i64 + (corner >> 1) as i64);
-                        if gx < 0 || gy < 0 || gx >= grid.width as i64 || gy >= grid.height as i64 {
-                            continue;
-                        }
-                        any = true;
-                        let row = (gy as u32) * grid.width + gx as u32;
-                        let (w, _) = bilinear(l.f, corner);
-                        entries.push(Splat {
-                            key: (u64::from(l.col) << 32) | u64::from(row),
-                            w: (weight * w) as f32,
-                            landing: li as u32,
-                            corner,
-                        });
-                    }
-                    if !any {
-                        off_grid += 1;
-                    }
-                }
-                entries.sort_unstable_by_key(|e| e.key);
-                let mut out = HoleOut {
-                    cols: Vec::with_capacity(entries.len()),
-                    rows: Vec::with_capacity(entries.len()),
-                    w: Vec::with_capacity(entries.len()),
-                    dw: Vec::with_capacity(entries.len() * n_terms),
-                    traced,
-                    in_pupil,
-                    off_grid,
-                };
-                let mut last_key = u64::MAX;
-                for e in entries {
-                    if e.key != last_key {
-                        out.cols.push((e.key >> 32) as u32);
-                        out.rows.push(e.key as u32);
-                        out.w.push(0.0);
-                        out.dw.extend(std::iter::repeat_n(0.0, n_terms));
-                        last_key = e.key;
-                    }
-                    *out.w.last_mut().expect("an entry was pushed") += e.w;
-                    if n_terms > 0 {
-                        // ∂(wx·wy)/∂W_j = ∂wx/∂fx·wy·∂fx/∂W_j + wx·∂wy/∂fy·∂fy/∂W_j.
-                        let l = &landings[e.landing as usize];
-                        let (_, dwdf) = bilinear(l.f, e.corner);
-                        let base = out.dw.len() - n_terms;
-                        let df = &dfs[e.landing as usize * n_terms..(e.landing as usize + 1) * n_terms];
-                        for (k, d) in df.iter().enumerate() {
-                            out.dw[base + k] += (weight * (dwdf[0] * d[0] + dwdf[1] * d[1])) as f32;
-                        }
-                    }
-                }
-                out
-            })
-            .collect();
-
-        // Assemble Tᵀ (rows = light-field samples) from the per-hole lists.
-        let n_cols = display.n_samples_per_band();
-        let nnz: usize = holes.iter().map(|h| h.cols.len()).sum();
-        if nnz >= u32::MAX as usize {
-            return Err(TransportError::TooLarge(nnz));
-        }
-        let mut counts = vec![0u32; n_cols + 1];
-        for h in &holes {
-            for &c in &h.cols {
-                counts[c as usize + 1] += 1;
-            }
-        }
-        for i in 0..n_cols {
-            counts[i + 1] += counts[i];
-        }
-        let mut t_indices = vec![0u32; nnz];
-        let mut t_values = vec![0f32; nnz];
-        let mut t_dvalues: Vec<Vec<f32>> = vec![vec![0f32; nnz]; n_terms];
-        let mut next = counts.clone();
-        let mut stats = TransportStats::default();
-        for h in &holes {
-            stats.sub_rays_traced += h.traced;
-            stats.sub_rays_in_pupil += h.in_pupil;
-            stats.sub_rays_off_grid += h.off_grid;
-            stats.holes_seen += u64::from(h.in_pupil > 0);
-            for e in 0..h.cols.len() {
-                let c = h.cols[e] as usize;
-                let dst = next[c] as usize;
-                next[c] += 1;
-                t_indices[dst] = h.rows[e];
-                t_values[dst] = h.w[e];
-                for (k, dv) in t_dvalues.iter_mut().enumerate() {
-                    dv[dst] = h.dw[e * n_terms + k];
-                }
-            }
-        }
-        let adjoint = CsrMatrix {
-            n_rows: n_cols,
-            n_cols: grid.len(),
-            indptr: counts,
-            indices: t_indices,
-            values: t_values,
+        let tracer = Tracer {
+            display,
+            eye,
+            options,
+            d_eye,
+            grid,
+            r_p,
+            poly: wavefront.polynomial(),
+            term_polys: options
+                .derivative_terms
+                .iter()
+                .map(|&j| ZernikePolynomial::single_term(j))
+                .collect(),
+            // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
+            shift_per_grad: d_eye * 1e-3 / grid.pixel_mm / r_p,
         };
+        // Trace and splat hole by hole in parallel; each hole's entries are merged per column.
+        let n_holes = (display.holes_x * display.holes_y) as usize;
+        let holes: Vec<HoleOut> = (0..n_holes).into_par_iter().map(|h| tracer.hole(h)).collect();
+        let n_terms = tracer.term_polys.len();
+        let (adjoint, t_dvalues, stats) = assemble(&holes, display.n_samples_per_band(), grid.len(), n_terms)?;
         let (forward, map) = adjoint.transpose_with_map();
         let derivative_forward = t_dvalues
             .iter()
