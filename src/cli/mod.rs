@@ -28,6 +28,9 @@ pub enum Command {
     /// Print example JSON to start from.
     #[command(subcommand)]
     Example(ExampleCommand),
+    /// Inspect a display description.
+    #[command(subcommand)]
+    Display(DisplayCommand),
     /// Render what a person sees of an image shown plainly on the display, or of a frame bundle.
     Simulate(SimulateArgs),
     /// Encode a document into a frame bundle that only the target can read.
@@ -44,6 +47,21 @@ pub enum Command {
     /// Run a display client: fetch this display's newest frame bundle, verify it and install it into
     /// `<out>/current/`, once or following the server's events.
     DisplayClient(crate::client::DisplayClientArgs),
+}
+
+/// `eyekey display ...`
+#[derive(Subcommand, Debug)]
+pub enum DisplayCommand {
+    /// Per band: the view spacing at the pupil, a view's diffraction spread there, the resolvability
+    /// M = A·s/(λd) and how many views a 4 mm and a 6 mm pupil resolve.
+    Check {
+        /// The display description (JSON).
+        #[arg(long)]
+        display: PathBuf,
+        /// Print the figures as JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// `eyekey experiment ...`
@@ -335,6 +353,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 &out,
             )?;
         }
+        Command::Display(DisplayCommand::Check { display, json }) => display_check(&display, json)?,
         Command::Simulate(a) => simulate(&a)?,
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
@@ -625,6 +644,40 @@ fn init_tracing() {
 }
 
 /// Prints a line on stdout; a reader that went away (`eyekey example display | head`) is not an error.
+/// `eyekey display check`: the resolvability table, or its JSON.
+fn display_check(path: &Path, json: bool) -> Result<()> {
+    let display = read_display(path)?;
+    let r = eyekey_core::physics::resolvability::Resolvability::of(&display);
+    if json {
+        return print_stdout(&(serde_json::to_string_pretty(&r)? + "\n"));
+    }
+    let mut text = format!(
+        "{} display, aperture {:.3} mm, views {}×{}, viewing distance {} mm\n\n\
+         | band | wavelength nm | view spacing mm | view spread mm | resolvability M | views resolved 4 mm | 6 mm |\n\
+         | --- | --- | --- | --- | --- | --- | --- |\n",
+        serde_json::to_value(display.aperture)?.as_str().unwrap_or("?"),
+        display.hole_diameter_mm,
+        display.views_u,
+        display.views_v,
+        display.viewing_distance_mm
+    );
+    for (n, b) in r.bands.iter().enumerate() {
+        text.push_str(&format!(
+            "| {n} | {:.1} | {:.3} | {:.3} | {:.2} | {} | {} |\n",
+            b.wavelength_nm,
+            b.view_spacing_mm,
+            b.view_spread_mm,
+            b.resolvability,
+            b.views_resolved.mm4,
+            b.views_resolved.mm6
+        ));
+    }
+    if let Some(w) = r.warning() {
+        text.push_str(&format!("\nwarning: {w}\n"));
+    }
+    print_stdout(&text)
+}
+
 fn print_stdout(text: &str) -> Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();

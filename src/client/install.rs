@@ -1,13 +1,12 @@
-//! Installing a bundle: verifying the downloaded zip, extracting it into a staging directory, adding the
-//! preview, and swapping it into `current/` (what `current/` held moves to `previous/`).
+//! Installing a bundle: verifying the downloaded zip, writing its verified files into a staging directory,
+//! adding the preview, and swapping it into `current/` (what `current/` held moves to `previous/`).
 
-use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 
 use super::error::{error_chain, io_err, ClientError};
 use super::{CURRENT_DIR, PREVIEW_FILE, PREVIOUS_DIR};
 use crate::service::routes::frames::FrameJob;
-use eyekey_core::bundle::{self, MANIFEST_FILE, MAX_FILE_BYTES, MAX_MANIFEST_BYTES};
+use eyekey_core::bundle::{self, MANIFEST_FILE};
 use eyekey_core::physics::observer::Observer;
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportOptions};
@@ -47,34 +46,33 @@ pub(super) struct Installed {
     pub(super) preview: Option<PathBuf>,
 }
 
-/// One file copied out of the zip into the staging directory.
+/// One verified file written into the staging directory.
 struct Extracted {
     name: String,
     sha256: String,
     bytes: u64,
 }
 
-/// Verifies the zip, extracts the manifest and the files it lists into a staging directory, adds the
-/// preview, and swaps the staging directory into `current/`.
+/// Verifies the zip, writes the manifest and the files it lists (as verified) into a staging directory, adds
+/// the preview, and swaps the staging directory into `current/`.
 pub(super) fn install_bundle(
     zip_path: &Path,
     out_dir: &Path,
     job: &FrameJob,
     preview: Option<&VisionProfile>,
 ) -> Result<Installed, ClientError> {
-    let (manifest, light_field) =
-        bundle::read_bundle(zip_path).map_err(|source| ClientError::Bundle { job: job.id, source })?;
-    let mut archive = reopen(zip_path, job)?;
+    let verified =
+        bundle::read_verified_bundle(zip_path).map_err(|source| ClientError::Bundle { job: job.id, source })?;
     let staging = tempfile::Builder::new()
         .prefix(STAGING_PREFIX)
         .tempdir_in(out_dir)
         .map_err(io_err("create a staging directory in", out_dir))?;
-    let extracted = extract(&mut archive, staging.path(), &manifest, job)?;
+    let extracted = write_files(staging.path(), &verified)?;
     check_against_listing(job, &extracted)?;
     let manifest_sha256 = extracted[0].sha256.clone();
     let preview_path = match preview {
         Some(profile) => {
-            write_preview(staging.path(), &manifest, &light_field, profile)?;
+            write_preview(staging.path(), &verified.manifest, &verified.light_field, profile)?;
             Some(out_dir.join(CURRENT_DIR).join(PREVIEW_FILE))
         }
         None => None,
@@ -82,58 +80,29 @@ pub(super) fn install_bundle(
     sync_dir(staging.path())?;
     swap_into_current(staging, out_dir)?;
     Ok(Installed {
-        frames: manifest.n_frames,
+        frames: verified.manifest.n_frames,
         manifest_sha256,
         preview: preview_path,
     })
 }
 
-type Archive = zip::ZipArchive<std::io::BufReader<std::fs::File>>;
-
-/// Opens the zip [`bundle::read_bundle`] has verified again, to extract its files.
-fn reopen(zip_path: &Path, job: &FrameJob) -> Result<Archive, ClientError> {
-    let file = std::fs::File::open(zip_path).map_err(io_err("open", zip_path))?;
-    zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| ClientError::Mismatch {
-        job: job.id,
-        reason: format!("the zip cannot be reopened: {e}"),
-    })
-}
-
-/// Copies the manifest (first) and the files it lists from the zip into `staging`, each written and synced.
+/// Writes the manifest (first) and the files it lists into `staging`, each written and synced.
 ///
-/// read_bundle has checked that every listed name is a plain file name and every file's checksum; the
-/// copies are checked again as they are extracted.
-fn extract(
-    archive: &mut Archive,
-    staging: &Path,
-    manifest: &bundle::Manifest,
-    job: &FrameJob,
-) -> Result<Vec<Extracted>, ClientError> {
-    let mismatch = |reason: String| ClientError::Mismatch { job: job.id, reason };
-    let mut wanted: Vec<(&str, Option<&str>, u64)> = vec![(MANIFEST_FILE, None, MAX_MANIFEST_BYTES)];
-    wanted.extend(
-        manifest
+/// read_verified_bundle has checked that every listed name is a plain file name and every file's size and
+/// checksum; the bytes written are the ones it verified.
+fn write_files(staging: &Path, verified: &bundle::VerifiedBundle) -> Result<Vec<Extracted>, ClientError> {
+    let files = std::iter::once((MANIFEST_FILE, verified.manifest_bytes.as_slice())).chain(
+        verified
             .files
             .iter()
-            .map(|f| (f.name.as_str(), Some(f.sha256.as_str()), f.bytes.min(MAX_FILE_BYTES))),
+            .map(|(name, bytes)| (name.as_str(), bytes.as_slice())),
     );
-    let mut extracted = Vec::with_capacity(wanted.len());
-    for (name, expected_sha, limit) in wanted {
-        let mut bytes = Vec::new();
-        archive
-            .by_name(name)
-            .map_err(|e| mismatch(format!("{name}: {e}")))?
-            .take(limit + 1)
-            .read_to_end(&mut bytes)
-            .map_err(|e| mismatch(format!("{name}: {e}")))?;
-        let sha = bundle::sha256_hex(&bytes);
-        if expected_sha.is_some_and(|s| !s.eq_ignore_ascii_case(&sha)) || bytes.len() as u64 > limit {
-            return Err(mismatch(format!("{name} changed while it was being extracted")));
-        }
-        write_synced(&staging.join(name), &bytes)?;
+    let mut extracted = Vec::with_capacity(1 + verified.files.len());
+    for (name, bytes) in files {
+        write_synced(&staging.join(name), bytes)?;
         extracted.push(Extracted {
             name: name.to_string(),
-            sha256: sha,
+            sha256: bundle::sha256_hex(bytes),
             bytes: bytes.len() as u64,
         });
     }
@@ -204,19 +173,12 @@ fn swap_into_current(staging: tempfile::TempDir, out_dir: &Path) -> Result<(), C
     sync_dir(out_dir)
 }
 
+/// Creates `path`, writes `bytes` and fsyncs the file.
 fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), ClientError> {
-    let mut f = std::fs::File::create_new(path).map_err(io_err("create", path))?;
-    f.write_all(bytes).map_err(io_err("write", path))?;
-    f.sync_all().map_err(io_err("sync", path))
+    bundle::create_synced(path, bytes).map_err(io_err("write", path))
 }
 
 /// Makes a directory's entries durable (a rename is only safe once its directory is synced).
 fn sync_dir(dir: &Path) -> Result<(), ClientError> {
-    #[cfg(unix)]
-    std::fs::File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(io_err("sync", dir))?;
-    #[cfg(not(unix))]
-    let _ = dir;
-    Ok(())
+    bundle::fsync_dir(dir).map_err(io_err("sync", dir))
 }

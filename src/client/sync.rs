@@ -61,8 +61,8 @@ impl std::fmt::Display for SyncOutcome {
 /// One catch-up: installs the display's newest succeeded job into `current/` unless it is already there.
 ///
 /// Downloads the bundle zip into a temporary file in the output directory, verifies it
-/// ([`eyekey_core::bundle::read_bundle`]: sizes, checksums, geometry) and checks it against the server's listing,
-/// writes the preview if configured, and swaps the result into `current/`; updates `state.json` last.
+/// ([`eyekey_core::bundle::read_verified_bundle`]: sizes, checksums, geometry) and checks it against the server's
+/// listing, writes the preview if configured, and swaps the result into `current/`; updates `state.json` last.
 pub async fn sync_once(cfg: &ClientConfig) -> Result<SyncOutcome, ClientError> {
     std::fs::create_dir_all(&cfg.out_dir).map_err(io_err("create", &cfg.out_dir))?;
     let Some(job) = newest_job(cfg).await? else {

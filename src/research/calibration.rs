@@ -60,6 +60,7 @@ impl Setup {
         Self {
             // 56×56 holes: a line of four 5×7 digits at two pixels per font dot (48 pixels) fits with a margin.
             display: DisplayGeometry {
+                aperture: Default::default(),
                 holes_x: 56,
                 holes_y: 56,
                 ..DisplayGeometry::secure()
@@ -404,6 +405,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let setup = Setup {
             display: DisplayGeometry {
+                aperture: Default::default(),
                 holes_x: 24,
                 holes_y: 24,
                 views_u: 3,

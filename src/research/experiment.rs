@@ -359,7 +359,6 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
 pub struct SweepPoint {
     /// What was varied.
     pub label: String,
-    /// The display.
     pub display: DisplayGeometry,
     /// Viewing pupil of the target, mm.
     pub pupil_mm: f64,
@@ -367,9 +366,7 @@ pub struct SweepPoint {
     pub decoys: u32,
     /// Decoy strategy.
     pub decoy: DecoyKind,
-    /// Decoy weight.
     pub decoy_weight: f64,
-    /// Target legibility.
     pub target_legibility: f64,
     /// Fraction of the sampled population that can read.
     pub readable_fraction: f64,
@@ -391,6 +388,7 @@ fn sweep_display(views: u32, pitch_mm: f64, distance_mm: f64, holes: u32, bands:
         _ => projectors,
     };
     DisplayGeometry {
+        aperture: Default::default(),
         holes_x: holes,
         holes_y: holes,
         hole_pitch_mm: pitch_mm,

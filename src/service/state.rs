@@ -8,6 +8,7 @@ use tokio::sync::{broadcast, watch, Notify};
 
 use super::config::Config;
 use super::crypto::MasterKey;
+use super::store::ids::JobId;
 use super::store::jobs::{JobRow, JobState};
 use super::store::Writer;
 
@@ -15,7 +16,7 @@ use super::store::Writer;
 #[derive(Clone, Debug)]
 pub struct JobEvent {
     /// The job.
-    pub job_id: String,
+    pub job_id: JobId,
     /// Its display.
     pub display_id: String,
     /// Its state after the change.
@@ -28,7 +29,7 @@ impl JobEvent {
     /// The event describing a row.
     pub fn of(row: &JobRow) -> Self {
         Self {
-            job_id: row.id.clone(),
+            job_id: row.id,
             display_id: row.display_id.clone(),
             state: row.state,
             progress: row.progress,

@@ -263,7 +263,7 @@ impl TestApp {
         .await
         .unwrap()
         .expect("a queued job");
-        let dir = self.data_dir.join("jobs").join(&job.id);
+        let dir = self.data_dir.join("jobs").join(job.id.to_string());
         std::fs::create_dir_all(dir.join("views")).unwrap();
         for name in ["frame_0.png", "frame_1.png", "barrier_mask.png"] {
             std::fs::write(dir.join(name), document_png(4, 4)).unwrap();
@@ -274,7 +274,7 @@ impl TestApp {
         let files = bundle::seal_bundle(&dir).unwrap();
         let ok = store::jobs::mark_succeeded(
             &self.state.writer,
-            &job.id,
+            job.id,
             job.attempts,
             &store::jobs::Success {
                 evaluation_summary: Some(r#"{"target_psnr_db": 30.0}"#.into()),
@@ -286,7 +286,7 @@ impl TestApp {
         .await
         .unwrap();
         assert!(ok);
-        job.id
+        job.id.to_string()
     }
 }
 
@@ -320,6 +320,7 @@ pub fn fast_options() -> Value {
 /// A 12×12-hole display with the `small` preset's optics: fast to solve.
 pub fn tiny_display() -> DisplayGeometry {
     DisplayGeometry {
+        aperture: Default::default(),
         holes_x: 12,
         holes_y: 12,
         ..DisplayGeometry::small()

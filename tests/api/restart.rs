@@ -83,7 +83,7 @@ async fn a_job_abandoned_by_a_crashed_worker_is_finished_by_another_after_its_le
     let claimed = store::jobs::claim_next(&app.state.writer, "crashed-worker", lease, store::now_ms())
         .await
         .unwrap();
-    assert_eq!(claimed.map(|j| j.id), Some(id.clone()));
+    assert_eq!(claimed.map(|j| j.id.to_string()), Some(id.clone()));
     app.stop().await;
 
     let app = spawn_app_in(dir.path(), |c| c.workers = 1).await;

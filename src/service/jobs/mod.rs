@@ -27,8 +27,7 @@ use eyekey_core::encoding::pipeline::{run_job, EncodeOptions, JobSpec, PipelineE
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::profile::VisionProfile;
 
-/// A job id.
-pub type JobId = String;
+pub use super::store::ids::JobId;
 
 /// An observer profile a job was created with, pinned to the version current at creation.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -85,7 +84,7 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<Job
     else {
         return Ok(None);
     };
-    let id = job.id.clone();
+    let id = job.id;
     execute_claimed(state, job).await?;
     Ok(Some(id))
 }
@@ -146,7 +145,7 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         Err(LoadError::Transient(e)) => return retry_or_fail(state, &job, &format!("{e:#}")).await,
     };
     // Renew the lease once before solving: it may have been cancelled, or lost, while claimed or loading.
-    match store::jobs::heartbeat(&state.writer, &job.id, attempt, state.config.queue.lease, 0.0).await? {
+    match store::jobs::heartbeat(&state.writer, job.id, attempt, state.config.queue.lease, 0.0).await? {
         None => return Ok(()),
         Some(true) => return end(state, &job, JobState::Cancelled, None).await,
         Some(false) => {}
@@ -243,7 +242,7 @@ impl Watch {
     /// lease to the solver, and publishes progress once it has moved by half a percent.
     async fn beat(&mut self, state: &AppState, job: &JobRow, progress: &AtomicU64, cancel: &AtomicBool) {
         let p = f64::from_bits(progress.load(Ordering::Relaxed));
-        match store::jobs::heartbeat(&state.writer, &job.id, job.attempts, state.config.queue.lease, p).await {
+        match store::jobs::heartbeat(&state.writer, job.id, job.attempts, state.config.queue.lease, p).await {
             Ok(Some(cancel_requested)) => {
                 if cancel_requested && self.stop == Stop::None {
                     self.stop = Stop::Cancel;
@@ -330,7 +329,7 @@ async fn finalise_success(
     solved: Solved,
     elapsed: Duration,
 ) -> anyhow::Result<()> {
-    let final_dir = state.data_dir().join("jobs").join(&job.id);
+    let final_dir = state.data_dir().join("jobs").join(job.id.to_string());
     if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
         // Left by an earlier attempt that renamed its output but died before recording it.
         tokio::fs::remove_dir_all(&final_dir).await?;
@@ -342,11 +341,11 @@ async fn finalise_success(
         bundle_files: serde_json::to_string(&solved.files)?,
         solve_ms: elapsed.as_millis() as i64,
     };
-    if store::jobs::mark_succeeded(&state.writer, &job.id, job.attempts, &success).await? {
+    if store::jobs::mark_succeeded(&state.writer, job.id, job.attempts, &success).await? {
         metrics::histogram!("eyekey_solve_duration_seconds", "outcome" => "succeeded").record(elapsed.as_secs_f64());
         metrics::counter!("eyekey_jobs_finished_total", "state" => "succeeded").increment(1);
         tracing::info!(job = %job.id, attempt = job.attempts, seconds = elapsed.as_secs_f64(), "job succeeded");
-        publish_current(state, &job.id).await;
+        publish_current(state, job.id).await;
     } else {
         tracing::warn!(job = %job.id, attempt = job.attempts, "finished after losing the job; result dropped");
     }
@@ -355,9 +354,9 @@ async fn finalise_success(
 
 /// Puts a job stopped by shutdown back in the queue without counting the attempt.
 async fn requeue_on_shutdown(state: &AppState, job: &JobRow) -> anyhow::Result<()> {
-    store::jobs::requeue(&state.writer, &job.id, job.attempts, None, true).await?;
+    store::jobs::requeue(&state.writer, job.id, job.attempts, None, true).await?;
     tracing::info!(job = %job.id, "shutting down: job re-queued");
-    publish_current(state, &job.id).await;
+    publish_current(state, job.id).await;
     Ok(())
 }
 
@@ -409,17 +408,17 @@ pub fn summarise(report: &serde_json::Value) -> Option<String> {
     serde_json::to_string(&Value::Object(out)).ok()
 }
 
-async fn publish_current(state: &AppState, id: &str) {
+async fn publish_current(state: &AppState, id: JobId) {
     if let Ok(Some(row)) = store::jobs::get(&state.db, id).await {
         state.publish(&row);
     }
 }
 
 async fn end(state: &AppState, job: &JobRow, to: JobState, error: Option<&str>) -> anyhow::Result<()> {
-    if store::jobs::mark_ended(&state.writer, &job.id, job.attempts, to, error).await? {
+    if store::jobs::mark_ended(&state.writer, job.id, job.attempts, to, error).await? {
         metrics::counter!("eyekey_jobs_finished_total", "state" => to.as_str()).increment(1);
         tracing::info!(job = %job.id, attempt = job.attempts, state = to.as_str(), error, "job ended");
-        publish_current(state, &job.id).await;
+        publish_current(state, job.id).await;
     }
     Ok(())
 }
@@ -428,8 +427,8 @@ async fn retry_or_fail(state: &AppState, job: &JobRow, error: &str) -> anyhow::R
     let message = format!("attempt {} of {}: {error}", job.attempts, job.max_attempts);
     if job.attempts < job.max_attempts {
         tracing::warn!(job = %job.id, error = %message, "job attempt failed; re-queued");
-        store::jobs::requeue(&state.writer, &job.id, job.attempts, Some(&message), false).await?;
-        publish_current(state, &job.id).await;
+        store::jobs::requeue(&state.writer, job.id, job.attempts, Some(&message), false).await?;
+        publish_current(state, job.id).await;
         state.job_queued.notify_one();
         Ok(())
     } else {

@@ -8,11 +8,12 @@ use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
-use super::{id_text, stream_file};
+use super::stream_file;
 use crate::service::auth::Operator;
 use crate::service::error::{ApiError, ApiPath, ErrorBody};
 use crate::service::jobs::bundle::is_plain_file_name;
 use crate::service::state::AppState;
+use crate::service::store::ids::JobId;
 use crate::service::store::{self, jobs::JobState};
 
 /// Routes of this resource.
@@ -31,7 +32,7 @@ pub struct ViewList {
 }
 
 async fn output_dir(state: &AppState, id: &Uuid) -> Result<std::path::PathBuf, ApiError> {
-    let job = store::jobs::get(&state.db, &id_text(id))
+    let job = store::jobs::get(&state.db, JobId::from(*id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
     match (job.state, &job.bundle_path) {

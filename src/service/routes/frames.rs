@@ -15,11 +15,12 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
-use super::{content_type_of, id_text, next_cursor, stream_file, PageQuery};
+use super::{content_type_of, next_cursor, stream_file, PageQuery};
 use crate::service::auth::DisplayClient;
 use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::{is_bundle_file, BundleFile, ZIP_NAME};
 use crate::service::state::AppState;
+use crate::service::store::ids::JobId;
 use crate::service::store::jobs::{JobFilter, JobRow, JobState};
 use crate::service::store::{self, to_time};
 
@@ -58,7 +59,7 @@ pub struct FrameJobList {
 
 fn frame_job(row: &JobRow) -> FrameJob {
     FrameJob {
-        id: row.id.parse().unwrap_or_default(),
+        id: row.id.as_uuid(),
         created_at: to_time(row.created_at),
         finished_at: row.finished_at.map(to_time),
         files: row
@@ -71,7 +72,7 @@ fn frame_job(row: &JobRow) -> FrameJob {
 
 /// This display's succeeded job with a bundle, else 404 (also for other displays' jobs).
 async fn own_job(state: &AppState, client: &DisplayClient, id: &Uuid) -> Result<JobRow, ApiError> {
-    store::jobs::get(&state.db, &id_text(id))
+    store::jobs::get(&state.db, JobId::from(*id))
         .await?
         .filter(|j| j.display_id == client.display_id && j.state == JobState::Succeeded && j.bundle_path.is_some())
         .ok_or(ApiError::NotFound("job"))
@@ -99,7 +100,7 @@ pub async fn list_frame_jobs(
     };
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
     Ok(Json(FrameJobList {
-        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
+        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string())),
         items: rows.iter().map(frame_job).collect(),
     }))
 }
@@ -216,7 +217,7 @@ pub async fn frame_events(
                 tokio::select! {
                     r = rx.recv() => match r {
                         Ok(ev) if ev.display_id == me && ev.state == JobState::Succeeded => {
-                            let Ok(Some(row)) = store::jobs::get(&state.db, &ev.job_id).await else { continue };
+                            let Ok(Some(row)) = store::jobs::get(&state.db, ev.job_id).await else { continue };
                             let Ok(data) = serde_json::to_string(&frame_job(&row)) else { continue };
                             let event = Event::default().event("job_succeeded").data(data);
                             return Some((Ok(event), (state, me, rx, shutdown)));

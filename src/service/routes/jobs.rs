@@ -22,6 +22,7 @@ use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::BundleFile;
 use crate::service::jobs::ObserverRef;
 use crate::service::state::{AppState, JobEvent};
+use crate::service::store::ids::JobId;
 use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
 use crate::service::store::{self, to_time};
 use eyekey_core::encoding::pipeline::{EncodeOptions, Method, PipelineError};
@@ -145,7 +146,7 @@ impl TryFrom<&JobRow> for JobView {
         let internal = |what: &str, e: serde_json::Error| ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"));
         let options: EncodeOptions = serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
         Ok(Self {
-            id: parse_id(&r.id),
+            id: r.id.as_uuid(),
             state: r.state,
             progress: r.progress,
             attempts: r.attempts,
@@ -237,7 +238,7 @@ pub async fn create_job(
     let request_hash = request_hash(&body, &options)?;
     let (target, observers) = resolve_inputs(&state.db, &body).await?;
     let new = NewJob {
-        id: id_text(&Uuid::new_v4()),
+        id: JobId::new_v4(),
         display_id: id_text(&body.display_id),
         document_id: id_text(&body.document_id),
         decoy_document_id: body.decoy_document_id.as_ref().map(id_text),
@@ -330,7 +331,7 @@ fn to_json<T: Serialize>(v: &T) -> Result<String, ApiError> {
 }
 
 async fn load(state: &AppState, id: &Uuid) -> Result<JobRow, ApiError> {
-    store::jobs::get(&state.db, &id_text(id))
+    store::jobs::get(&state.db, JobId::from(*id))
         .await?
         .ok_or(ApiError::NotFound("job"))
 }
@@ -381,7 +382,7 @@ pub async fn list_jobs(
     };
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
     Ok(Json(JobList {
-        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
+        next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string())),
         items: rows.iter().map(JobView::try_from).collect::<Result<_, _>>()?,
     }))
 }
@@ -408,7 +409,7 @@ pub async fn cancel_job(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
-    let row = store::jobs::request_cancel(&state.writer, &id_text(&id))
+    let row = store::jobs::request_cancel(&state.writer, JobId::from(id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
     let status = match row.state {
@@ -464,7 +465,7 @@ pub async fn job_events(
 /// The state of one job event stream.
 struct Follow {
     state: AppState,
-    id: String,
+    id: JobId,
     rx: tokio::sync::broadcast::Receiver<JobEvent>,
     shutdown: tokio::sync::watch::Receiver<bool>,
     /// (state, progress in thousandths, attempts) last sent.
@@ -480,7 +481,7 @@ impl Follow {
             return None;
         }
         loop {
-            let row = match store::jobs::get(&self.state.db, &self.id).await {
+            let row = match store::jobs::get(&self.state.db, self.id).await {
                 Ok(Some(row)) => row,
                 Ok(None) => return None,
                 Err(e) => {

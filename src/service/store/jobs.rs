@@ -10,6 +10,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use sqlx::SqlitePool;
 
+use super::ids::JobId;
 use super::{now_ms, Cursor, Writer};
 
 /// Where a job is in its life.
@@ -108,7 +109,7 @@ pub async fn stop_jobs_of(
 #[derive(Clone, Debug, sqlx::FromRow)]
 pub struct JobRow {
     /// Id.
-    pub id: String,
+    pub id: JobId,
     /// Display it is for.
     pub display_id: String,
     /// Document shown.
@@ -174,7 +175,7 @@ const COLUMNS: &str = "id, display_id, document_id, decoy_document_id, profile_i
 #[derive(Clone, Debug)]
 pub struct NewJob {
     /// Id.
-    pub id: String,
+    pub id: JobId,
     /// Display.
     pub display_id: String,
     /// Document.
@@ -223,7 +224,7 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
          ON CONFLICT (idempotency_key) DO NOTHING
          RETURNING {COLUMNS}"
     ))
-    .bind(&job.id)
+    .bind(job.id)
     .bind(&job.display_id)
     .bind(&job.document_id)
     .bind(&job.decoy_document_id)
@@ -254,7 +255,7 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
 }
 
 /// One job.
-pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+pub async fn get(pool: &SqlitePool, id: JobId) -> Result<Option<JobRow>, sqlx::Error> {
     sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE id = ?"))
         .bind(id)
         .fetch_optional(pool)
@@ -295,7 +296,7 @@ pub async fn list(
 
 /// Asks a job to stop: a queued job is cancelled at once, a running one gets `cancel_requested` (its
 /// worker stops between solver iterations). Returns the job after the change.
-pub async fn request_cancel(writer: &Writer, id: &str) -> Result<Option<JobRow>, sqlx::Error> {
+pub async fn request_cancel(writer: &Writer, id: JobId) -> Result<Option<JobRow>, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
     sqlx::query_as::<_, JobRow>(&format!(
@@ -364,7 +365,7 @@ pub async fn claim_next(
 /// longer owns the job, else whether a cancel was asked for.
 pub async fn heartbeat(
     writer: &Writer,
-    id: &str,
+    id: JobId,
     attempt: i64,
     lease: Duration,
     progress: f64,
@@ -400,7 +401,7 @@ pub struct Success {
 }
 
 /// Marks the caller's attempt succeeded. False if it no longer owned the job.
-pub async fn mark_succeeded(writer: &Writer, id: &str, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
+pub async fn mark_succeeded(writer: &Writer, id: JobId, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
@@ -423,7 +424,7 @@ pub async fn mark_succeeded(writer: &Writer, id: &str, attempt: i64, s: &Success
 /// Ends the caller's attempt in `failed` or `cancelled`. False if it no longer owned the job.
 pub async fn mark_ended(
     writer: &Writer,
-    id: &str,
+    id: JobId,
     attempt: i64,
     state: JobState,
     error: Option<&str>,
@@ -450,7 +451,7 @@ pub async fn mark_ended(
 /// is shutting down; the job did nothing wrong). False if it no longer owned the job.
 pub async fn requeue(
     writer: &Writer,
-    id: &str,
+    id: JobId,
     attempt: i64,
     error: Option<&str>,
     refund: bool,

@@ -5,6 +5,7 @@
 pub mod audit;
 pub mod displays;
 pub mod documents;
+pub mod ids;
 pub mod jobs;
 pub mod profiles;
 

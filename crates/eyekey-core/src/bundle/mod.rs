@@ -85,6 +85,7 @@ mod tests {
 
     fn small_display() -> DisplayGeometry {
         DisplayGeometry {
+            aperture: Default::default(),
             holes_x: 6,
             holes_y: 4,
             l_max: 2.0,
@@ -137,6 +138,23 @@ mod tests {
         let mut m: Manifest = serde_json::from_slice(&fs::read(&path).unwrap()).unwrap();
         edit(&mut m);
         fs::write(path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    }
+
+    #[test]
+    fn a_verified_read_returns_every_file_as_it_is_on_disk() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("b");
+        let (_, l, m) = write_small(&dir);
+        let v = read_verified_bundle(&dir).unwrap();
+        assert_eq!(v.manifest, m);
+        assert_eq!(v.light_field.len(), l.len());
+        assert_eq!(v.manifest_bytes, fs::read(dir.join(MANIFEST_FILE)).unwrap());
+        let names: Vec<&str> = v.files.iter().map(|(n, _)| n.as_str()).collect();
+        let listed: Vec<&str> = m.files.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, listed);
+        for (name, bytes) in &v.files {
+            assert_eq!(bytes, &fs::read(dir.join(name)).unwrap(), "{name}");
+        }
     }
 
     #[test]

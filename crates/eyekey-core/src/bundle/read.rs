@@ -25,6 +25,26 @@ use std::path::{Path, PathBuf};
 /// Returns the manifest and the light field, band-interleaved like [`write_bundle`]'s input, with
 /// L = v/65535·L_max.
 pub fn read_bundle(path: &Path) -> Result<(Manifest, Vec<f32>), BundleError> {
+    let b = read_verified_bundle(path)?;
+    Ok((b.manifest, b.light_field))
+}
+
+/// A bundle read and verified by [`read_verified_bundle`].
+#[derive(Clone, Debug)]
+pub struct VerifiedBundle {
+    /// The parsed manifest.
+    pub manifest: Manifest,
+    /// `manifest.json` exactly as read.
+    pub manifest_bytes: Vec<u8>,
+    /// The light field, as [`read_bundle`] returns it.
+    pub light_field: Vec<f32>,
+    /// Every listed file's verified bytes, in the manifest's order, as (name, bytes).
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
+/// Reads and verifies the bundle at `path` like [`read_bundle`], and also returns the verified bytes of every
+/// file, so a caller that installs the bundle need not read (or inflate) it a second time.
+pub fn read_verified_bundle(path: &Path) -> Result<VerifiedBundle, BundleError> {
     let meta = fs::metadata(path).map_err(io_err("open", path))?;
     let mut source = if meta.is_dir() {
         Source::Dir(path.to_path_buf())
@@ -84,7 +104,13 @@ pub fn read_bundle(path: &Path) -> Result<(Manifest, Vec<f32>), BundleError> {
         ColorType::L8,
         "8-bit greyscale",
     )?;
-    Ok((manifest, l))
+    let files = manifest.files.iter().map(|e| e.name.clone()).zip(contents).collect();
+    Ok(VerifiedBundle {
+        manifest,
+        manifest_bytes,
+        light_field: l,
+        files,
+    })
 }
 
 /// Where each role sits in `Manifest::files`.

@@ -316,6 +316,7 @@ mod tests {
 
     fn small_display() -> DisplayGeometry {
         DisplayGeometry {
+            aperture: Default::default(),
             holes_x: 10,
             holes_y: 8,
             ..DisplayGeometry::paper()

@@ -49,11 +49,27 @@ pub enum DisplayError {
     UnknownPreset(String),
 }
 
+/// What sits in front of the screen: a barrier of circular holes, or an array of square lenslets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum Aperture {
+    /// Circular holes of `hole_diameter_mm` in an opaque barrier `gap_mm` in front of the screen.
+    #[default]
+    Pinhole,
+    /// Square lenslets of side `hole_diameter_mm` (normally the pitch) and focal length `gap_mm`, the screen at
+    /// their focal plane: each pixel point leaves as a collimated beam of slope (h − q)/f.
+    Lenslet,
+}
+
 /// Geometry and spectra of a 5D light-field display, plus the viewing distance it is designed for.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct DisplayGeometry {
+    /// Pinhole barrier or lenslet array (default: pinhole).
+    #[serde(default)]
+    pub aperture: Aperture,
     /// Holes across (X).
     pub holes_x: u32,
     /// Holes down (Y).
@@ -92,6 +108,7 @@ impl DisplayGeometry {
     /// 0.08 mm (one screen pixel) keeps each view's footprint at the pupil to (p_s + hole)·d/g = 2.4 mm.
     pub fn paper() -> Self {
         Self {
+            aperture: Default::default(),
             holes_x: 100,
             holes_y: 100,
             hole_pitch_mm: 0.4,
@@ -113,6 +130,7 @@ impl DisplayGeometry {
     pub fn secure() -> Self {
         let p_s = 0.3 / 9.0;
         Self {
+            aperture: Default::default(),
             holes_x: 48,
             holes_y: 48,
             hole_pitch_mm: 0.3,
@@ -130,6 +148,7 @@ impl DisplayGeometry {
     /// A small display for tests and quick demos: 24×24 holes, 5×5 views, the `paper` optics.
     pub fn small() -> Self {
         Self {
+            aperture: Default::default(),
             holes_x: 24,
             holes_y: 24,
             ..Self::paper()
@@ -171,12 +190,29 @@ impl DisplayGeometry {
         range("gap_mm", self.gap_mm, 0.1, 1000.0, "mm")?;
         range("viewing_distance_mm", self.viewing_distance_mm, 50.0, 10000.0, "mm")?;
         range("l_max", self.l_max, 1e-6, 1e6, "")?;
-        if self.hole_diameter_mm > self.hole_pitch_mm {
+        if self.hole_diameter_mm > self.hole_pitch_mm * (1.0 + 1e-9) {
+            let what = match self.aperture {
+                Aperture::Pinhole => "a hole",
+                Aperture::Lenslet => "a lenslet",
+            };
             return Err(DisplayError::Inconsistent {
                 field: "hole_diameter_mm",
                 reason: format!(
-                    "a hole of {} mm does not fit the hole pitch of {} mm",
+                    "{what} of {} mm does not fit the pitch of {} mm",
                     self.hole_diameter_mm, self.hole_pitch_mm
+                ),
+            });
+        }
+        let views_width = self.views_u.max(self.views_v) as f64 * self.screen_pixel_pitch_mm;
+        if self.aperture == Aperture::Lenslet && views_width > self.hole_diameter_mm * (1.0 + 1e-9) {
+            return Err(DisplayError::Inconsistent {
+                field: "views_u",
+                reason: format!(
+                    "{} views of {} mm ({} mm) do not fit behind a lenslet of {} mm",
+                    self.views_u.max(self.views_v),
+                    self.screen_pixel_pitch_mm,
+                    views_width,
+                    self.hole_diameter_mm
                 ),
             });
         }

@@ -119,6 +119,7 @@ pub fn sample_person<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope) -> Visi
         zernike_pupil_diameter_mm: None,
         prescription: None,
         spectral,
+        reference_wavelength_nm: None,
     }
 }
 

@@ -50,6 +50,10 @@ pub struct VisionProfile {
     #[serde(default)]
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub spectral: SpectralSensitivity,
+    /// Wavelength the aberrations were measured at, nm (400–1000); defaults to 555. Under wave optics each band
+    /// adds the eye's chromatic defocus relative to it (Thibos et al. 1992).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_wavelength_nm: Option<f64>,
 }
 
 impl VisionProfile {
@@ -61,6 +65,7 @@ impl VisionProfile {
             zernike_pupil_diameter_mm: None,
             prescription: None,
             spectral: SpectralSensitivity::default(),
+            reference_wavelength_nm: None,
         }
     }
 
@@ -82,6 +87,14 @@ impl VisionProfile {
                 "pupil_diameter_mm",
                 format!("must be within 2..=9 mm, got {}", self.pupil_diameter_mm),
             ));
+        }
+        if let Some(w) = self.reference_wavelength_nm {
+            if !(w.is_finite() && (400.0..=1000.0).contains(&w)) {
+                return Err(bad(
+                    "reference_wavelength_nm",
+                    format!("must be within 400..=1000 nm, got {w}"),
+                ));
+            }
         }
         if let Some(z) = self.zernike_pupil_diameter_mm {
             if !(z.is_finite() && (2.0..=10.0).contains(&z)) {
@@ -145,6 +158,22 @@ impl VisionProfile {
         Ok(z.with_order_range_zeroed(0..=1))
     }
 
+    /// The wavelength the aberrations are referenced to, nm.
+    pub fn reference_wavelength(&self) -> f64 {
+        self.reference_wavelength_nm
+            .unwrap_or(crate::physics::chromatic::DEFAULT_REFERENCE_WAVELENGTH_NM)
+    }
+
+    /// The wavefront at the viewing pupil for light of `wavelength_nm`: [`Self::effective_wavefront`] plus the
+    /// eye's chromatic defocus relative to the reference wavelength (Thibos et al. 1992).
+    pub fn wavefront_at(&self, wavelength_nm: f64) -> Result<ZernikeCoefficients, ProfileError> {
+        use crate::physics::chromatic::{chromatic_defocus_d, defocus_coefficient_um};
+        let mut z = self.effective_wavefront()?;
+        let m = chromatic_defocus_d(wavelength_nm, self.reference_wavelength());
+        z.coefficients_um[4] += defocus_coefficient_um(m, z.pupil_radius_mm());
+        Ok(z)
+    }
+
     /// The person's cone fundamentals.
     pub fn cone_fundamentals(&self) -> ConeFundamentals {
         self.spectral.cone_fundamentals()
@@ -153,6 +182,25 @@ impl VisionProfile {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_wavefront_in_the_blue_band_gains_the_chromatic_defocus() {
+        // A perfect eye referenced at 555 nm: at 450 nm it is −0.827 D myopic (Thibos 1992), which at a 6 mm
+        // pupil is c₂⁰ = 0.827·9/(4√3) = 1.074 µm; at the reference wavelength nothing is added.
+        let p = VisionProfile::perfect();
+        let blue = p.wavefront_at(450.0).unwrap();
+        assert!((blue.coefficients_um[4] - 0.827091 * 9.0 / (4.0 * 3f64.sqrt())).abs() < 1e-5);
+        assert_eq!(p.wavefront_at(555.0).unwrap(), p.effective_wavefront().unwrap());
+        let bad = VisionProfile {
+            reference_wavelength_nm: Some(5.0),
+            ..VisionProfile::perfect()
+        };
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .starts_with("reference_wavelength_nm"));
+    }
+
     use super::*;
 
     #[test]

@@ -94,6 +94,13 @@ impl ProjectorSpectrum {
         }
         values
     }
+
+    /// The power-weighted mean wavelength of the band, nm: Σ λ·E(λ) / Σ E(λ) on the grid.
+    pub fn centroid_nm(&self) -> f64 {
+        let e = self.power_on_grid();
+        let total: f64 = e.iter().sum();
+        wavelengths_nm().zip(&e).map(|(l, v)| l * v).sum::<f64>() / total.max(1e-300)
+    }
 }
 
 /// Coupling matrix of Eq. 12, c_na = ∫ E_n(λ) x̄_a(λ) dλ for a = L, M, S: the cone stimulus

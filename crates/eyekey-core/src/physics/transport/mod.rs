@@ -169,6 +169,7 @@ mod tests {
 
     fn tiny() -> DisplayGeometry {
         DisplayGeometry {
+            aperture: Default::default(),
             holes_x: 16,
             holes_y: 12,
             ..DisplayGeometry::paper()
@@ -312,6 +313,7 @@ mod tests {
         // d·D·ΔD = 500 mm × 6 mm × 1 D / 1000 = 3.0 mm. Measure it as the second moment: a uniform disc of
         // diameter b has ⟨r²⟩ = b²/8 (plus the hole and view-bin spread, which is small). Within 10 %.
         let d = DisplayGeometry {
+            aperture: Default::default(),
             holes_x: 31,
             holes_y: 31,
             ..DisplayGeometry::paper()
