@@ -8,6 +8,7 @@ use clap::{Args, Parser, Subcommand};
 use eyekey_core::encoding::options::{Ablation, DecoyKind, Method};
 use eyekey_core::imaging;
 use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::observer::Optics;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportCache, TransportOptions};
@@ -99,6 +100,15 @@ pub enum ExperimentCommand {
         /// People sampled.
         #[arg(long, default_value_t = 1000)]
         population: u32,
+    },
+    /// Frames encoded under the geometric model, seen under the geometric and the wave model.
+    Wave {
+        /// Output directory (results.md and pictures).
+        #[arg(long, default_value = "docs/experiments/wave")]
+        out: PathBuf,
+        /// Display preset.
+        #[arg(long, default_value = "secure")]
+        preset: String,
     },
     /// Simulated views with known text and their legibility, for calibrating the threshold against OCR
     /// (`benches/calibrate_ocr.sh`).
@@ -304,6 +314,13 @@ pub struct SimulateArgs {
     /// Vertical eye offset, mm.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub eye_y: f64,
+    /// Change of viewing distance, mm (positive = farther than the display's design distance).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub eye_z: f64,
+    /// Forward model: geometric (what the encoder assumes today) or wave (diffraction, chromatic defocus,
+    /// light through neighbouring blocks, physical brightness).
+    #[arg(long, value_enum, default_value = "geometric")]
+    pub optics: Optics,
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
     pub sub_rays: u32,
@@ -391,6 +408,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
         }
+        Command::Experiment(ExperimentCommand::Wave { out, preset }) => {
+            let display = DisplayGeometry::preset(&preset)?;
+            print!("{}", crate::research::wave::run(&out.join(&preset), &display, &preset)?);
+        }
         Command::Experiment(ExperimentCommand::Calibrate { out, count, seed }) => {
             crate::research::calibration::calibration_views(&out, count, seed)?;
             println!("wrote {count} views and views.csv to {}", out.display());
@@ -440,9 +461,8 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
     let eye = EyePosition {
         x_mm: a.eye_x,
         y_mm: a.eye_y,
-        dz_mm: 0.0,
+        dz_mm: a.eye_z,
     };
-    let observer = Observer::new(&display, &profile, eye, &options, &TransportCache::disabled())?;
     let l = match (&a.image, &a.frames) {
         (Some(img), _) => plain_light_field_for_image(&display, &imaging::load_image(img)?),
         (None, Some(bundle)) => {
@@ -466,14 +486,32 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
         }
         (None, None) => bail!("give --image or --frames"),
     };
-    let view = observer.view(&l);
-    imaging::save_rgb_png(&observer.picture(&view), &a.out)?;
+    let cache = TransportCache::disabled();
+    let (picture, transports) = match a.optics {
+        Optics::Geometric => {
+            let observer = Observer::new(&display, &profile, eye, &options, &cache)?;
+            (observer.picture(&observer.view(&l)), vec![observer.transport])
+        }
+        Optics::Wave => {
+            let observer =
+                eyekey_core::physics::observer::WaveObserver::new(&display, &profile, eye, &options, &cache)?;
+            let view = observer.view(&l);
+            (
+                observer.picture(&view),
+                observer.bands.into_iter().map(|b| b.transport).collect(),
+            )
+        }
+    };
+    imaging::save_rgb_png(&picture, &a.out)?;
+    let (traced, entered): (u64, u64) = transports.iter().fold((0, 0), |(t, e), tr| {
+        (t + tr.stats.sub_rays_traced, e + tr.stats.sub_rays_in_pupil)
+    });
     eprintln!(
         "wrote {} ({}×{} retinal pixels; {:.1} % of traced rays entered the pupil)",
         a.out.display(),
-        observer.transport.grid.width,
-        observer.transport.grid.height,
-        100.0 * observer.transport.stats.sub_rays_in_pupil as f64 / observer.transport.stats.sub_rays_traced as f64
+        transports[0].grid.width,
+        transports[0].grid.height,
+        100.0 * entered as f64 / traced.max(1) as f64
     );
     Ok(())
 }

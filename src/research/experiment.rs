@@ -513,7 +513,7 @@ fn sweep_configs() -> Vec<SweepConfig> {
 }
 
 /// The sampled target of the sweep and the `secure` experiment (seed 4242, no pupil spread).
-fn sampled_target() -> VisionProfile {
+pub(crate) fn sampled_target() -> VisionProfile {
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
     eyekey_core::physics::population::sample_person(
         &mut rng,

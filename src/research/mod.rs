@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod calibration;
 pub mod experiment;
+pub mod wave;
 
 /// The head of a Markdown table: the column names and the `| --- |` rule, each line ending in a newline.
 pub(crate) fn table_header(columns: &[&str]) -> String {

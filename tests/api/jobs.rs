@@ -332,3 +332,25 @@ async fn cancelling_a_job_while_the_solver_runs_stops_it_within_moments() {
     let leftovers: Vec<_> = std::fs::read_dir(app.data_dir.join("jobs")).unwrap().collect();
     assert!(leftovers.is_empty(), "a cancelled job leaves no output");
 }
+
+#[tokio::test]
+async fn a_job_for_a_display_that_does_not_resolve_its_views_is_accepted_with_a_warning() {
+    let app = spawn_app().await;
+    let mut f = app.fixtures().await;
+    let r = app
+        .op_post("/v1/displays", &json!({ "name": "vault", "preset": "secure" }))
+        .await;
+    let display = expect_json(r, StatusCode::CREATED).await["display"].clone();
+    f.display_id = display["id"].as_str().unwrap().to_string();
+    let job = app.create_job(&f).await;
+    assert_eq!(job["state"], "queued");
+    let warnings = job["warnings"].as_array().unwrap();
+    assert_eq!(warnings.len(), 1, "{job}");
+    assert_eq!(warnings[0], display["warnings"][0], "the display's own warning");
+
+    // The job view keeps saying so.
+    let id = job["id"].as_str().unwrap();
+    assert_eq!(app.job(id).await["warnings"], job["warnings"]);
+    let list = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;
+    assert_eq!(list["items"][0]["warnings"], job["warnings"]);
+}

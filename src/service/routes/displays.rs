@@ -16,6 +16,7 @@ use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
 use crate::service::store::{self, displays::DisplayRow, to_time};
 use eyekey_core::physics::display::{DisplayError, DisplayGeometry};
+use eyekey_core::physics::resolvability::Resolvability;
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {
@@ -64,6 +65,13 @@ pub struct DisplayView {
     pub frame_height: u32,
     /// Number of projectors (frames per bundle).
     pub bands: usize,
+    /// Whether diffraction at the apertures lets the views be told apart at the pupil, per band: view
+    /// spacing s = p_s·d/g, the diffraction spread of one view, the resolvability M = A·s/(λ·d) (resolved
+    /// while M ≥ 1) and the view channels a 4 mm and a 6 mm pupil separate. Computed from the geometry.
+    pub resolvability: Resolvability,
+    /// Problems with the design that do not stop it being registered or used: empty when every band
+    /// resolves its views (M ≥ 1), else one line naming the worst band.
+    pub warnings: Vec<String>,
     /// Registration time.
     pub created_at: DateTime<Utc>,
     /// When the current token was issued.
@@ -88,14 +96,26 @@ pub struct DisplayList {
     pub next_cursor: Option<String>,
 }
 
+/// The warnings a display's resolvability gives: empty when every band resolves its views.
+pub(crate) fn resolvability_warnings(resolvability: &Resolvability) -> Vec<String> {
+    resolvability.warning().into_iter().collect()
+}
+
+/// A stored geometry (`DisplayGeometry` JSON), parsed.
+pub(crate) fn stored_geometry(json: &str) -> Result<DisplayGeometry, ApiError> {
+    serde_json::from_str(json).map_err(|e| ApiError::Internal(anyhow::anyhow!("stored geometry: {e}")))
+}
+
 fn view(row: &DisplayRow) -> Result<DisplayView, ApiError> {
-    let geometry: DisplayGeometry =
-        serde_json::from_str(&row.geometry).map_err(|e| ApiError::Internal(anyhow::anyhow!("stored geometry: {e}")))?;
+    let geometry = stored_geometry(&row.geometry)?;
     let (frame_width, frame_height) = geometry.frame_size();
+    let resolvability = Resolvability::of(&geometry);
     Ok(DisplayView {
         id: row.id.parse().unwrap_or_default(),
         name: row.name.clone(),
         bands: geometry.n_bands(),
+        warnings: resolvability_warnings(&resolvability),
+        resolvability,
         geometry,
         frame_width,
         frame_height,
@@ -121,7 +141,8 @@ const TOKEN_PREFIX: &str = "ekd_";
 /// Register a display.
 ///
 /// Returns the display and its access token; the token is shown only in this response and stored
-/// as its SHA-256.
+/// as its SHA-256. A design whose views diffraction leaves unresolved is still registered, with a line in
+/// `warnings`.
 #[utoipa::path(
     post, path = "/v1/displays", tag = "displays",
     request_body = RegisterDisplay,

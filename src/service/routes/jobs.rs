@@ -1,5 +1,6 @@
 //! `/v1/jobs`: encoding jobs (operator only): create (idempotent), read, list, cancel, follow.
 
+use std::collections::HashMap;
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -16,6 +17,7 @@ use sha2::{Digest, Sha256};
 use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
+use super::displays::{resolvability_warnings, stored_geometry};
 use super::{id_text, next_cursor, PageQuery};
 use crate::service::auth::{Operator, OPERATOR};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
@@ -26,6 +28,7 @@ use crate::service::store::ids::JobId;
 use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
 use crate::service::store::{self, to_time};
 use eyekey_core::encoding::pipeline::{EncodeOptions, Method, PipelineError};
+use eyekey_core::physics::resolvability::Resolvability;
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {
@@ -111,6 +114,10 @@ pub struct JobView {
     pub bundle_files: Option<Vec<BundleFile>>,
     /// Times.
     pub timings: JobTimings,
+    /// Problems that do not stop the job: when diffraction leaves the display's views unresolved (some band
+    /// has resolvability M < 1, see the display's `resolvability`), one line naming the worst band. The job
+    /// still runs, but the target may not see the intended image.
+    pub warnings: Vec<String>,
 }
 
 /// A page of jobs.
@@ -140,9 +147,9 @@ fn parse_id(s: &str) -> Uuid {
     s.parse().unwrap_or_default()
 }
 
-impl TryFrom<&JobRow> for JobView {
-    type Error = ApiError;
-    fn try_from(r: &JobRow) -> Result<Self, ApiError> {
+impl JobView {
+    /// The view of a stored job, with its display's `warnings`.
+    fn new(r: &JobRow, warnings: Vec<String>) -> Result<Self, ApiError> {
         let internal = |what: &str, e: serde_json::Error| ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"));
         let options: EncodeOptions = serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
         Ok(Self {
@@ -172,7 +179,22 @@ impl TryFrom<&JobRow> for JobView {
                 finished_at: r.finished_at.map(to_time),
                 solve_seconds: r.solve_ms.map(|ms| ms as f64 / 1000.0),
             },
+            warnings,
         })
+    }
+}
+
+/// The resolvability warnings of a display's stored geometry (`DisplayGeometry` JSON).
+fn geometry_warnings(geometry_json: &str) -> Result<Vec<String>, ApiError> {
+    let geometry = stored_geometry(geometry_json)?;
+    Ok(resolvability_warnings(&Resolvability::of(&geometry)))
+}
+
+/// The warnings of the display a job is for (deleted displays included; none if it is unknown).
+async fn display_warnings(db: &sqlx::SqlitePool, display_id: &str) -> Result<Vec<String>, ApiError> {
+    match store::displays::geometry(db, display_id).await? {
+        Some(json) => geometry_warnings(&json),
+        None => Ok(Vec::new()),
     }
 }
 
@@ -209,7 +231,8 @@ fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
 ///
 /// With an `Idempotency-Key` header, repeating the same request returns the job created the first time
 /// (200 instead of 201); the same key with a different body is a 409. The target's and observers'
-/// current profile versions are recorded in the job.
+/// current profile versions are recorded in the job. A display whose views diffraction leaves unresolved
+/// does not stop the job; `warnings` says so.
 #[utoipa::path(
     post, path = "/v1/jobs", tag = "jobs",
     request_body = CreateJob,
@@ -236,7 +259,7 @@ pub async fn create_job(
         return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
     let request_hash = request_hash(&body, &options)?;
-    let (target, observers) = resolve_inputs(&state.db, &body).await?;
+    let (warnings, target, observers) = resolve_inputs(&state.db, &body).await?;
     let new = NewJob {
         id: JobId::new_v4(),
         display_id: id_text(&body.display_id),
@@ -252,7 +275,7 @@ pub async fn create_job(
         request_hash,
     };
     let (status, row) = enqueue(&state, &new).await?;
-    let mut response = (status, Json(JobView::try_from(&row)?)).into_response();
+    let mut response = (status, Json(JobView::new(&row, warnings)?)).into_response();
     if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
         response.headers_mut().insert(header::LOCATION, location);
     }
@@ -271,15 +294,16 @@ fn request_hash(body: &CreateJob, options: &EncodeOptions) -> Result<String, Api
     )))
 }
 
-/// Checks that every input of a job creation exists; returns the target profile and the observers
-/// pinned to their current versions.
+/// Checks that every input of a job creation exists; returns the display's warnings, the target profile
+/// and the observers pinned to their current versions.
 async fn resolve_inputs(
     db: &sqlx::SqlitePool,
     body: &CreateJob,
-) -> Result<(store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
-    store::displays::get(db, &id_text(&body.display_id))
+) -> Result<(Vec<String>, store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
+    let display = store::displays::get(db, &id_text(&body.display_id))
         .await?
         .ok_or_else(|| ApiError::invalid("display_id", "no such display"))?;
+    let warnings = geometry_warnings(&display.geometry)?;
     store::documents::get(db, &id_text(&body.document_id))
         .await?
         .ok_or_else(|| ApiError::invalid("document_id", "no such document"))?;
@@ -301,7 +325,7 @@ async fn resolve_inputs(
             version: p.current_version,
         });
     }
-    Ok((target, observers))
+    Ok((warnings, target, observers))
 }
 
 /// Enqueues a job, or finds the one this idempotency key already created: `201` and the new job (audited,
@@ -352,7 +376,9 @@ pub async fn get_job(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<JobView>, ApiError> {
-    Ok(Json(JobView::try_from(&load(&state, &id).await?)?))
+    let row = load(&state, &id).await?;
+    let warnings = display_warnings(&state.db, &row.display_id).await?;
+    Ok(Json(JobView::new(&row, warnings)?))
 }
 
 /// List jobs, newest first, optionally by state and display.
@@ -381,9 +407,19 @@ pub async fn list_jobs(
         display_id: q.display_id.as_ref().map(id_text),
     };
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
+    // A page holds few displays: look each one's warnings up once.
+    let mut warnings: HashMap<&str, Vec<String>> = HashMap::new();
+    let mut items = Vec::with_capacity(rows.len());
+    for row in &rows {
+        if !warnings.contains_key(row.display_id.as_str()) {
+            let w = display_warnings(&state.db, &row.display_id).await?;
+            warnings.insert(&row.display_id, w);
+        }
+        items.push(JobView::new(row, warnings[row.display_id.as_str()].clone())?);
+    }
     Ok(Json(JobList {
         next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string())),
-        items: rows.iter().map(JobView::try_from).collect::<Result<_, _>>()?,
+        items,
     }))
 }
 
@@ -424,7 +460,8 @@ pub async fn cancel_job(
     };
     store::audit::record(&state.writer, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
-    Ok((status, Json(JobView::try_from(&row)?)))
+    let warnings = display_warnings(&state.db, &row.display_id).await?;
+    Ok((status, Json(JobView::new(&row, warnings)?)))
 }
 
 /// Follow a job: server-sent events.
@@ -446,12 +483,15 @@ pub async fn job_events(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
-    let id = load(&state, &id).await?.id;
+    let row = load(&state, &id).await?;
+    // A display's geometry never changes, so neither do its warnings.
+    let warnings = display_warnings(&state.db, &row.display_id).await?;
     let follow = Follow {
+        id: row.id,
+        warnings,
         rx: state.events.subscribe(),
         shutdown: state.shutdown.clone(),
         state,
-        id,
         last: None,
         done: false,
     };
@@ -466,6 +506,8 @@ pub async fn job_events(
 struct Follow {
     state: AppState,
     id: JobId,
+    /// The display's warnings, sent with every view.
+    warnings: Vec<String>,
     rx: tokio::sync::broadcast::Receiver<JobEvent>,
     shutdown: tokio::sync::watch::Receiver<bool>,
     /// (state, progress in thousandths, attempts) last sent.
@@ -498,7 +540,7 @@ impl Follow {
                 };
                 self.last = Some(key);
                 self.done = row.state.is_terminal();
-                let view = JobView::try_from(&row).ok()?;
+                let view = JobView::new(&row, self.warnings.clone()).ok()?;
                 return Some(Event::default().event(kind).data(serde_json::to_string(&view).ok()?));
             }
             if !self.wait().await {

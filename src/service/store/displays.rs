@@ -59,6 +59,14 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DisplayRow>, sqlx
     .await
 }
 
+/// The `DisplayGeometry` JSON of a display, live or deleted (jobs keep referring to deleted ones).
+pub async fn geometry(pool: &SqlitePool, id: &str) -> Result<Option<String>, sqlx::Error> {
+    sqlx::query_scalar::<_, String>("SELECT geometry FROM displays WHERE id = ?")
+        .bind(id)
+        .fetch_optional(pool)
+        .await
+}
+
 /// The live display whose token has this hash (the hash column is unique and indexed).
 pub async fn by_token_hash(pool: &SqlitePool, hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
     sqlx::query_as::<_, DisplayRow>(&format!(

@@ -9,7 +9,9 @@ use crate::imaging;
 use crate::physics::display::DisplayGeometry;
 use crate::physics::profile::{ProfileError, VisionProfile};
 use crate::physics::spectral::{coupling, ConeFundamentals};
-use crate::physics::transport::{EyePosition, TransportCache, TransportError, TransportMatrix, TransportOptions};
+use crate::physics::transport::{
+    EyePosition, TransportCache, TransportError, TransportMatrix, TransportOptions, WaveSampling,
+};
 use crate::physics::zernike::ZernikeCoefficients;
 
 /// Errors building an observer.
@@ -112,4 +114,86 @@ pub fn plain_light_field_for_image(display: &DisplayGeometry, img: &RgbImage) ->
         .map(|v| v * display.l_max as f32)
         .collect();
     crate::physics::transport::plain_light_field(display, &per_hole)
+}
+
+/// Which forward model a simulation uses (docs/design.md §2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum Optics {
+    /// Straight rays, one transport for every band, each aperture's light normalised (the paper's idealisation).
+    #[default]
+    Geometric,
+    /// Fraunhofer diffraction at the apertures, the eye's chromatic defocus per band, light through
+    /// neighbouring blocks, physical brightness.
+    Wave,
+}
+
+/// An observer under wave optics: one transport per band, each at the band's centroid wavelength with the eye's
+/// chromatic defocus (Thibos et al. 1992) and the aperture's diffraction; the view is S_a = Σ_n c_na T_n L_n
+/// (paper Eq. 13 with a band-dependent T).
+#[derive(Clone, Debug)]
+pub struct WaveObserver {
+    /// One observer per band n, its coupling zero outside band n.
+    pub bands: Vec<Observer>,
+    /// The LMS of the display's white for this observer.
+    pub white: [f64; 3],
+}
+
+impl WaveObserver {
+    /// Builds the per-band transports for `profile` at `eye`.
+    pub fn new(
+        display: &DisplayGeometry,
+        profile: &VisionProfile,
+        eye: EyePosition,
+        options: &TransportOptions,
+        cache: &TransportCache,
+    ) -> Result<Self, ObserverError> {
+        profile.validate()?;
+        let c = coupling(&display.projectors, &profile.cone_fundamentals()).c;
+        let white = std::array::from_fn(|a| c.iter().map(|row| row[a]).sum::<f64>() * display.l_max);
+        let mut bands = Vec::with_capacity(display.n_bands());
+        for (n, p) in display.projectors.iter().enumerate() {
+            let lambda = p.centroid_nm();
+            let wave = WaveSampling {
+                wavelength_nm: lambda,
+                neighbour_blocks: neighbour_blocks(display, lambda, profile.pupil_diameter_mm),
+            };
+            let opts = TransportOptions {
+                wave: Some(wave),
+                ..options.clone()
+            };
+            let transport = cache.get_or_build(display, &profile.wavefront_at(lambda)?, eye, &opts)?;
+            let masked = (0..c.len()).map(|m| if m == n { c[m] } else { [0.0; 3] }).collect();
+            bands.push(Observer::with_coupling(transport, masked, display.l_max));
+        }
+        Ok(Self { bands, white })
+    }
+
+    /// The LMS retinal image `[r·3 + a]` of light field `l`.
+    pub fn view(&self, l: &[f32]) -> Vec<f32> {
+        let mut out = self.bands[0].view(l);
+        for b in &self.bands[1..] {
+            for (o, v) in out.iter_mut().zip(b.view(l)) {
+                *o += v;
+            }
+        }
+        out
+    }
+
+    /// What this observer perceives of `view`, as an sRGB picture.
+    pub fn picture(&self, view: &[f32]) -> RgbImage {
+        let g = self.bands[0].transport.grid;
+        imaging::lms_to_srgb_image(view, g.width, g.height, self.white)
+    }
+}
+
+/// Blocks on each side of the block an eye looks at through an aperture whose light can still reach a pupil
+/// of `pupil_mm`: light from k blocks over arrives k·p_h(1 + g/d)·d/g off the view's aim, so k covers the
+/// diffraction spread 1.22λd/A plus the pupil's radius, with one block to spare.
+pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm: f64) -> u32 {
+    let d = display.viewing_distance_mm;
+    let spread = 1.22 * wavelength_nm * 1e-6 * d / display.hole_diameter_mm;
+    let per_block = display.hole_pitch_mm * (1.0 + display.gap_mm / d) * d / display.gap_mm;
+    (((spread + pupil_mm / 2.0) / per_block).ceil() as u32 + 1).min(16)
 }

@@ -74,7 +74,7 @@ impl TransportCache {
         let key = serde_json::json!({
             "display": display, "wavefront": wavefront, "eye": eye,
             "sub_rays": options.sub_rays, "seed": options.seed,
-            "oversample": options.retina_oversample, "terms": options.derivative_terms,
+            "oversample": options.retina_oversample, "terms": options.derivative_terms, "wave": options.wave,
         })
         .to_string();
         {

@@ -67,6 +67,24 @@ pub struct TransportOptions {
     pub retina_oversample: u32,
     /// OSA indices j whose ∂T/∂W_j is built alongside T (empty: none).
     pub derivative_terms: Vec<usize>,
+    /// Wave-optics sampling for one wavelength; `None` is the geometric model (docs/design.md §2).
+    pub wave: Option<WaveSampling>,
+}
+
+/// How a wave-optics build samples one band (docs/design.md §2, "Wave optics").
+///
+/// Each sub-ray gets a Fraunhofer diffraction angle drawn from its aperture's pattern at `wavelength_nm`
+/// (Airy for a pinhole, sinc² per axis for a lenslet), and every aperture passes light from the screen pixels
+/// of its own block and of `neighbour_blocks` blocks around it, so light leaking through a neighbouring hole
+/// reaches the eye too. Brightness is physical: one constant per build (the eye's adaptation) makes the
+/// centre aperture of a plain image as bright as the image; every other aperture is as bright as the light
+/// that actually enters the pupil through it.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WaveSampling {
+    /// Wavelength of the band, nm.
+    pub wavelength_nm: f64,
+    /// Blocks of screen pixels on each side of an aperture's own block whose light it passes.
+    pub neighbour_blocks: u32,
 }
 
 impl Default for TransportOptions {
@@ -76,6 +94,7 @@ impl Default for TransportOptions {
             seed: 7,
             retina_oversample: 1,
             derivative_terms: Vec::new(),
+            wave: None,
         }
     }
 }

@@ -1,7 +1,8 @@
 //! The ray tracer that builds T and ∂T/∂W (paper Eqs. 9–11).
 
 use super::rng::SplitMix64;
-use crate::physics::display::DisplayGeometry;
+use crate::physics::diffraction::DiffractionSampler;
+use crate::physics::display::{Aperture, DisplayGeometry};
 use crate::physics::transport::{
     CsrMatrix, EyePosition, RetinalGrid, TransportError, TransportMatrix, TransportOptions, TransportStats,
 };
@@ -84,51 +85,117 @@ struct Tracer<'a> {
     term_polys: Vec<ZernikePolynomial>,
     /// Retinal pixels of landing shift per unit of ∂W/∂ρ (µm).
     shift_per_grad: f64,
+    /// Diffraction-angle tables, for a wave-optics build.
+    sampler: Option<DiffractionSampler>,
+    /// A wave-optics build's weight of one sub-ray (the same for every aperture: physical brightness).
+    wave_weight: f64,
 }
 
 impl Tracer<'_> {
-    /// Traces hole `h`'s sub-rays (S per view, jittered over the hole's disc and the screen pixel's square)
-    /// to the pupil; returns the landings of those that enter it, their ∂f/∂W_j (flat, landing × term) and
-    /// the number traced.
+    /// Traces hole `h`'s sub-rays (S per view, jittered over the aperture and the screen pixel's square) to
+    /// the pupil; returns the landings of those that enter it, their ∂f/∂W_j (flat, landing × term) and the
+    /// number traced. A geometric build traces the hole's own block; a wave-optics build also the blocks
+    /// around it, and adds a diffraction angle to every sub-ray.
     fn trace_hole(&self, h: usize) -> (Vec<Landing>, Vec<[f64; 2]>, u64) {
         let display = self.display;
         let (hx, hy) = ((h as u32) % display.holes_x, (h as u32) / display.holes_x);
-        let centre = display.hole_centre_mm(hx, hy);
         let mut rng = SplitMix64(self.options.seed ^ (h as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         let s = self.options.sub_rays as usize;
         let views = (display.views_u * display.views_v) as usize;
         let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
         let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * self.term_polys.len());
         let mut traced = 0u64;
-        for j in 0..display.views_v {
-            for i in 0..display.views_u {
-                let q0 = display.screen_pixel_centre_mm(hx, hy, i, j);
-                let col = display.sample_index(hx, hy, i, j) as u32;
-                for _ in 0..s {
-                    traced += 1;
-                    // Uniform point in the hole's disc and in the screen pixel's square.
-                    let rho = 0.5 * display.hole_diameter_mm * rng.next_f64().sqrt();
-                    let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
-                    let sx = centre[0] + rho * cos;
-                    let sy = centre[1] + rho * sin;
-                    let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
-                    let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
-                    if let Some(f) = self.land(sx, sy, qx, qy, &mut dfs) {
-                        landings.push(Landing { col, f });
-                    }
-                }
+        // Blocks k over send their light k·p_h(1 + g/d)·d/g away from the view's aim, to the other side: an eye
+        // offset by e sees mostly the blocks around k* = −e/(that pitch).
+        let (nb, kx, ky) = match self.options.wave {
+            None => (0, 0, 0),
+            Some(w) => {
+                let per_block =
+                    display.hole_pitch_mm * (1.0 + display.gap_mm / display.viewing_distance_mm) * self.d_eye
+                        / display.gap_mm;
+                let k = |e: f64| (-e / per_block).round() as i64;
+                (w.neighbour_blocks as i64, k(self.eye.x_mm), k(self.eye.y_mm))
+            }
+        };
+        let (y0, x0) = (hy as i64 + ky, hx as i64 + kx);
+        for by in (y0 - nb).max(0)..=(y0 + nb).min(display.holes_y as i64 - 1) {
+            for bx in (x0 - nb).max(0)..=(x0 + nb).min(display.holes_x as i64 - 1) {
+                let block = (bx as u32, by as u32);
+                traced += self.trace_block(hx, hy, block, &mut rng, &mut landings, &mut dfs);
             }
         }
         (landings, dfs, traced)
     }
 
+    /// Traces the sub-rays from the screen pixels of `block` through aperture (hx, hy); returns how many.
+    fn trace_block(
+        &self,
+        hx: u32,
+        hy: u32,
+        block: (u32, u32),
+        rng: &mut SplitMix64,
+        landings: &mut Vec<Landing>,
+        dfs: &mut Vec<[f64; 2]>,
+    ) -> u64 {
+        let display = self.display;
+        let centre = display.hole_centre_mm(hx, hy);
+        let a = display.hole_diameter_mm;
+        let mut traced = 0u64;
+        for j in 0..display.views_v {
+            for i in 0..display.views_u {
+                let q0 = display.screen_pixel_centre_mm(block.0, block.1, i, j);
+                let col = display.sample_index(block.0, block.1, i, j) as u32;
+                for _ in 0..self.options.sub_rays {
+                    traced += 1;
+                    // The ray's slope is num/g (+ a diffraction angle); kept as a numerator so the geometric
+                    // model evaluates exactly the expression it always has.
+                    let (sx, sy, num, diffraction) = match display.aperture {
+                        Aperture::Pinhole => {
+                            // Uniform point in the hole's disc and in the screen pixel's square; slope (s − q)/g.
+                            let rho = 0.5 * a * rng.next_f64().sqrt();
+                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                            let (sx, sy) = (centre[0] + rho * cos, centre[1] + rho * sin);
+                            let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            (sx, sy, [sx - qx, sy - qy], [0.0; 2])
+                        }
+                        Aperture::Lenslet => {
+                            // The lens collimates each screen point q at its focal plane: every point of the
+                            // square aperture leaves with the chief ray's slope (h − q)/f.
+                            let sx = centre[0] + (rng.next_f64() - 0.5) * a;
+                            let sy = centre[1] + (rng.next_f64() - 0.5) * a;
+                            let qx = q0[0] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            let qy = q0[1] + (rng.next_f64() - 0.5) * display.screen_pixel_pitch_mm;
+                            (sx, sy, [centre[0] - qx, centre[1] - qy], [0.0; 2])
+                        }
+                    };
+                    let diffraction = match (&self.sampler, self.options.wave) {
+                        (Some(sampler), Some(w)) => {
+                            let (u1, u2) = (rng.next_f64(), rng.next_f64());
+                            match display.aperture {
+                                Aperture::Pinhole => sampler.pinhole_angle(a, w.wavelength_nm, u1, u2),
+                                Aperture::Lenslet => sampler.lenslet_angle(a, w.wavelength_nm, u1, u2),
+                            }
+                        }
+                        _ => diffraction,
+                    };
+                    if let Some(f) = self.land(sx, sy, num, diffraction, dfs) {
+                        landings.push(Landing { col, f });
+                    }
+                }
+            }
+        }
+        traced
+    }
+
     /// The landing (retinal-grid pixel units) of the ray from screen point q through barrier point s, or
     /// `None` if the iris stops it; pushes its ∂f/∂W_j onto `dfs`.
-    fn land(&self, sx: f64, sy: f64, qx: f64, qy: f64, dfs: &mut Vec<[f64; 2]>) -> Option<[f64; 2]> {
-        let (d, g) = (self.display, &self.grid);
-        // Slope (u, v) = (s − q)/g; the ray meets the pupil plane at P = s + d·(u, v).
-        let px = sx + self.d_eye * (sx - qx) / d.gap_mm - self.eye.x_mm;
-        let py = sy + self.d_eye * (sy - qy) / d.gap_mm - self.eye.y_mm;
+    fn land(&self, sx: f64, sy: f64, num: [f64; 2], theta: [f64; 2], dfs: &mut Vec<[f64; 2]>) -> Option<[f64; 2]> {
+        let (g, gap) = (&self.grid, self.display.gap_mm);
+        // The ray leaves the barrier at s with slope (u, v) = num/g + θ and meets the pupil plane at
+        // P = s + d·(u, v).
+        let px = sx + self.d_eye * num[0] / gap + self.d_eye * theta[0] - self.eye.x_mm;
+        let py = sy + self.d_eye * num[1] / gap + self.d_eye * theta[1] - self.eye.y_mm;
         let (ux, uy) = (px / self.r_p, py / self.r_p);
         if ux * ux + uy * uy > 1.0 {
             return None;
@@ -182,7 +249,13 @@ impl Tracer<'_> {
         let (landings, dfs, traced) = self.trace_hole(h);
         let in_pupil = landings.len() as u64;
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
-        let weight = if in_pupil > 0 { k2 / in_pupil as f64 } else { 0.0 };
+        let weight = if self.options.wave.is_some() {
+            self.wave_weight
+        } else if in_pupil > 0 {
+            k2 / in_pupil as f64
+        } else {
+            0.0
+        };
         let (entries, off_grid) = self.splat(&landings, weight);
         let n_terms = self.term_polys.len();
         let mut out = HoleOut {
@@ -216,6 +289,45 @@ impl Tracer<'_> {
             }
         }
         out
+    }
+}
+
+impl Tracer<'_> {
+    /// A wave-optics build's weight per sub-ray: k² over the mean number of sub-rays per aperture that enter
+    /// this pupil from the design position, so that a plain image is seen at its own intensity there (the
+    /// eye adapted to the display), and brightness at other apertures and eye positions is the light that
+    /// enters the pupil.
+    fn physical_weight(&self) -> f64 {
+        if self.options.wave.is_none() {
+            return 0.0;
+        }
+        let design = Tracer {
+            eye: EyePosition::default(),
+            d_eye: self.display.viewing_distance_mm,
+            shift_per_grad: self.shift_per_grad / self.d_eye * self.display.viewing_distance_mm,
+            sampler: self.sampler.clone(),
+            term_polys: Vec::new(),
+            poly: self.poly.clone(),
+            ..*self
+        };
+        // The mean over a 5×5 grid of apertures between a sixth and five sixths of the barrier.
+        let (hx, hy) = (self.display.holes_x as usize, self.display.holes_y as usize);
+        let picks: Vec<usize> = (0..25)
+            .map(|k| {
+                let (i, j) = (k % 5, k / 5);
+                let x = (hx * (1 + i) / 6).min(hx - 1);
+                let y = (hy * (1 + j) / 6).min(hy - 1);
+                y * hx + x
+            })
+            .collect();
+        let total: usize = picks.par_iter().map(|&h| design.trace_hole(h).0.len()).sum();
+        let n = total as f64 / picks.len() as f64;
+        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
+        if n > 0.0 {
+            k2 / n
+        } else {
+            0.0
+        }
     }
 }
 
@@ -298,6 +410,12 @@ impl TransportMatrix {
                 .collect(),
             // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
             shift_per_grad: d_eye * 1e-3 / grid.pixel_mm / r_p,
+            sampler: options.wave.map(|_| DiffractionSampler::new()),
+            wave_weight: 0.0,
+        };
+        let tracer = Tracer {
+            wave_weight: tracer.physical_weight(),
+            ..tracer
         };
         // Trace and splat hole by hole in parallel; each hole's entries are merged per column.
         let n_holes = (display.holes_x * display.holes_y) as usize;
