@@ -1,6 +1,6 @@
 //! Zipping a bundle for download.
 
-use crate::bundle::{check_manifest, BundleError, Manifest, Source, MANIFEST_FILE, MAX_MANIFEST_BYTES};
+use crate::bundle::{read_manifest, BundleError, Source, MANIFEST_FILE};
 use std::io::{Seek, Write};
 use std::path::Path;
 
@@ -10,16 +10,7 @@ use std::path::Path;
 /// stored (already compressed), other files deflated.
 pub fn zip_bundle<W: Write + Seek>(dir: &Path, out: W) -> Result<(), BundleError> {
     let mut source = Source::Dir(dir.to_path_buf());
-    let manifest_bytes = source.read(MANIFEST_FILE, MAX_MANIFEST_BYTES)?;
-    if manifest_bytes.len() as u64 > MAX_MANIFEST_BYTES {
-        return Err(BundleError::TooLarge {
-            name: MANIFEST_FILE.to_string(),
-            limit: MAX_MANIFEST_BYTES,
-        });
-    }
-    let manifest: Manifest =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
-    check_manifest(&manifest)?;
+    let (manifest_bytes, manifest, _) = read_manifest(&mut source)?;
 
     let zip_err = |e: zip::result::ZipError| BundleError::Zip { reason: e.to_string() };
     let options = zip::write::SimpleFileOptions::default()

@@ -56,16 +56,7 @@ pub fn read_verified_bundle(path: &Path) -> Result<VerifiedBundle, BundleError> 
         Source::Zip(Box::new(archive))
     };
 
-    let manifest_bytes = source.read(MANIFEST_FILE, MAX_MANIFEST_BYTES)?;
-    if manifest_bytes.len() as u64 > MAX_MANIFEST_BYTES {
-        return Err(BundleError::TooLarge {
-            name: MANIFEST_FILE.to_string(),
-            limit: MAX_MANIFEST_BYTES,
-        });
-    }
-    let manifest: Manifest =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
-    let layout = check_manifest(&manifest)?;
+    let (manifest_bytes, manifest, layout) = read_manifest(&mut source)?;
 
     // Every listed file, verified before anything is decoded.
     let mut contents = Vec::with_capacity(manifest.files.len());
@@ -111,6 +102,22 @@ pub fn read_verified_bundle(path: &Path) -> Result<VerifiedBundle, BundleError> 
         light_field: l,
         files,
     })
+}
+
+/// Reads `manifest.json` from `source` (capped at [`MAX_MANIFEST_BYTES`]), parses and checks it; returns its
+/// bytes, the manifest and where each role sits in its file list.
+pub(crate) fn read_manifest(source: &mut Source) -> Result<(Vec<u8>, Manifest, Layout), BundleError> {
+    let manifest_bytes = source.read(MANIFEST_FILE, MAX_MANIFEST_BYTES)?;
+    if manifest_bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(BundleError::TooLarge {
+            name: MANIFEST_FILE.to_string(),
+            limit: MAX_MANIFEST_BYTES,
+        });
+    }
+    let manifest: Manifest =
+        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
+    let layout = check_manifest(&manifest)?;
+    Ok((manifest_bytes, manifest, layout))
 }
 
 /// Where each role sits in `Manifest::files`.
