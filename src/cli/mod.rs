@@ -537,6 +537,9 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         bail!("--out {} already exists; choose a new directory", a.out.display());
     }
     let display = read_display(&a.display)?;
+    if let Some(w) = eyekey_core::physics::resolvability::Resolvability::of(&display).warning() {
+        eprintln!("warning: {w}; frames are computed for the geometric model (see `eyekey display check`)");
+    }
     let target = read_profile(&a.target)?;
     let observers = a.observer.iter().map(|p| read_profile(p)).collect::<Result<Vec<_>>>()?;
     let document = imaging::load_image(&a.document)?;
