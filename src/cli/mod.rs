@@ -696,7 +696,7 @@ fn display_check(path: &Path, json: bool) -> Result<()> {
         "{} display, aperture {:.3} mm, views {}×{}, viewing distance {} mm\n\n\
          | band | wavelength nm | view spacing mm | view spread mm | resolvability M | views resolved 4 mm | 6 mm |\n\
          | --- | --- | --- | --- | --- | --- | --- |\n",
-        serde_json::to_value(display.aperture)?.as_str().unwrap_or("?"),
+        display.aperture.as_str(),
         display.hole_diameter_mm,
         display.views_u,
         display.views_v,

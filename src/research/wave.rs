@@ -53,9 +53,7 @@ fn score(
     save_rgb_png(&gpic, &out.join(format!("{name}_geometric.png")))?;
     let w = WaveObserver::new(display, person, eye, &topts, cache)?;
     let view = w.view(l);
-    let lum = eyekey_core::evaluation::luminance(&view);
-    let white = eyekey_core::evaluation::luminance(&w.white.map(|v| v as f32));
-    let ws = reference.score(name, &lum, white[0] as f64);
+    let ws = reference.score_lms(name, &view, w.white);
     save_rgb_png(&w.picture(&view), &out.join(format!("{name}_wave.png")))?;
     Ok(Scored {
         geometric: gs.legibility,
@@ -110,7 +108,7 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
         "Preset `{label}` ({} holes of {:.3} mm, {}×{} views, {} mm), resolvability M per band: {}. Frames encoded \
          with the geometric model (multiplex, {} population decoys, {} iterations); legibility threshold \
          {DEFAULT_THRESHOLD}.\n\n| viewer | legibility, geometric | legibility, wave |\n| --- | --- | --- |\n",
-        serde_json::to_value(display.aperture)?.as_str().unwrap_or("?"),
+        display.aperture.as_str(),
         display.hole_diameter_mm,
         display.views_u,
         display.views_v,

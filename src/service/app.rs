@@ -99,6 +99,7 @@ impl Application {
             instance_id: uuid::Uuid::new_v4().to_string(),
             metrics: routes::metrics::recorder(),
             transport_cache: Arc::new(TransportCache::new(config.transport_cache_bytes)),
+            display_warnings: Default::default(),
             config,
         }));
         let router = router(state.clone());

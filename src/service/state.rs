@@ -65,6 +65,8 @@ pub struct Inner {
     pub metrics: metrics_exporter_prometheus::PrometheusHandle,
     /// Transport operators shared by this process's workers (per display, profile version and eye position).
     pub transport_cache: Arc<eyekey_core::physics::transport::TransportCache>,
+    /// Resolvability warnings per display id (geometry never changes, so they never go stale).
+    pub display_warnings: std::sync::Mutex<std::collections::HashMap<String, Vec<String>>>,
 }
 
 impl std::ops::Deref for AppState {

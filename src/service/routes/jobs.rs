@@ -1,6 +1,5 @@
 //! `/v1/jobs`: encoding jobs (operator only): create (idempotent), read, list, cancel, follow.
 
-use std::collections::HashMap;
 use std::convert::Infallible;
 use std::time::Duration;
 
@@ -190,12 +189,25 @@ fn geometry_warnings(geometry_json: &str) -> Result<Vec<String>, ApiError> {
     Ok(resolvability_warnings(&Resolvability::of(&geometry)))
 }
 
-/// The warnings of the display a job is for (deleted displays included; none if it is unknown).
-async fn display_warnings(db: &sqlx::SqlitePool, display_id: &str) -> Result<Vec<String>, ApiError> {
-    match store::displays::geometry(db, display_id).await? {
-        Some(json) => geometry_warnings(&json),
-        None => Ok(Vec::new()),
+/// The warnings of the display a job is for (deleted displays included; none if it is unknown). A display's
+/// geometry never changes, so they are computed once per display and kept in the state: job reads, a hot
+/// path, cost no query for them.
+async fn display_warnings(state: &AppState, display_id: &str) -> Result<Vec<String>, ApiError> {
+    if let Some(w) = state
+        .display_warnings
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .get(display_id)
+    {
+        return Ok(w.clone());
     }
+    let warnings = match store::displays::geometry(&state.db, display_id).await? {
+        Some(json) => geometry_warnings(&json)?,
+        None => return Ok(Vec::new()),
+    };
+    let mut cache = state.display_warnings.lock().unwrap_or_else(|e| e.into_inner());
+    cache.insert(display_id.to_string(), warnings.clone());
+    Ok(warnings)
 }
 
 /// The pipeline's own range checks, reported with the offending field.
@@ -377,7 +389,7 @@ pub async fn get_job(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<JobView>, ApiError> {
     let row = load(&state, &id).await?;
-    let warnings = display_warnings(&state.db, &row.display_id).await?;
+    let warnings = display_warnings(&state, &row.display_id).await?;
     Ok(Json(JobView::new(&row, warnings)?))
 }
 
@@ -407,15 +419,9 @@ pub async fn list_jobs(
         display_id: q.display_id.as_ref().map(id_text),
     };
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
-    // A page holds few displays: look each one's warnings up once.
-    let mut warnings: HashMap<&str, Vec<String>> = HashMap::new();
     let mut items = Vec::with_capacity(rows.len());
     for row in &rows {
-        if !warnings.contains_key(row.display_id.as_str()) {
-            let w = display_warnings(&state.db, &row.display_id).await?;
-            warnings.insert(&row.display_id, w);
-        }
-        items.push(JobView::new(row, warnings[row.display_id.as_str()].clone())?);
+        items.push(JobView::new(row, display_warnings(&state, &row.display_id).await?)?);
     }
     Ok(Json(JobList {
         next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string())),
@@ -460,7 +466,7 @@ pub async fn cancel_job(
     };
     store::audit::record(&state.writer, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
-    let warnings = display_warnings(&state.db, &row.display_id).await?;
+    let warnings = display_warnings(&state, &row.display_id).await?;
     Ok((status, Json(JobView::new(&row, warnings)?)))
 }
 
@@ -485,7 +491,7 @@ pub async fn job_events(
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let row = load(&state, &id).await?;
     // A display's geometry never changes, so neither do its warnings.
-    let warnings = display_warnings(&state.db, &row.display_id).await?;
+    let warnings = display_warnings(&state, &row.display_id).await?;
     let follow = Follow {
         id: row.id,
         warnings,

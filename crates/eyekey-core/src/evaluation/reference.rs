@@ -53,8 +53,12 @@ impl Reference {
     /// Scores what `observer` sees of light field `l`; returns the score and the picture.
     pub fn score_observer(&self, label: &str, observer: &Observer, l: &[f32]) -> (ViewScore, RgbImage) {
         let view = observer.view(l);
-        let lum = luminance(&view);
-        let white = 0.689_902_7 * observer.white[0] + 0.348_321_9 * observer.white[1];
-        (self.score(label, &lum, white), observer.picture(&view))
+        (self.score_lms(label, &view, observer.white), observer.picture(&view))
+    }
+
+    /// Scores an LMS view (`[r·3 + a]`) seen by a viewer whose display white is `white_lms`.
+    pub fn score_lms(&self, label: &str, view: &[f32], white_lms: [f64; 3]) -> ViewScore {
+        let white = 0.689_902_7 * white_lms[0] + 0.348_321_9 * white_lms[1];
+        self.score(label, &luminance(view), white)
     }
 }

@@ -156,6 +156,12 @@ impl Default for DiffractionSampler {
 }
 
 impl DiffractionSampler {
+    /// The process's one sampler, tabulated on first use (the tables are the same for every build).
+    pub fn shared() -> &'static Self {
+        static SHARED: std::sync::OnceLock<DiffractionSampler> = std::sync::OnceLock::new();
+        SHARED.get_or_init(Self::new)
+    }
+
     /// Tabulates both distributions.
     pub fn new() -> Self {
         let airy_total = airy_encircled_energy(AIRY_X_MAX);

@@ -62,6 +62,16 @@ pub enum Aperture {
     Lenslet,
 }
 
+impl Aperture {
+    /// The name used in JSON: `pinhole` or `lenslet`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Pinhole => "pinhole",
+            Self::Lenslet => "lenslet",
+        }
+    }
+}
+
 /// Geometry and spectra of a 5D light-field display, plus the viewing distance it is designed for.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -285,6 +295,13 @@ impl DisplayGeometry {
             h[0] * aim + (i as f64 - (self.views_u as f64 - 1.0) / 2.0) * self.screen_pixel_pitch_mm,
             h[1] * aim + (j as f64 - (self.views_v as f64 - 1.0) / 2.0) * self.screen_pixel_pitch_mm,
         ]
+    }
+
+    /// How far apart, at a pupil `distance_mm` from the barrier, land the light of one aperture's own block
+    /// and of the next block passing through the same aperture, mm: the block pitch p_h·(1 + g/d) times
+    /// distance/g.
+    pub fn block_shift_at_pupil_mm(&self, distance_mm: f64) -> f64 {
+        self.hole_pitch_mm * (1.0 + self.gap_mm / self.viewing_distance_mm) * distance_mm / self.gap_mm
     }
 
     /// Distance between adjacent views where they cross the pupil plane, mm: p_s·d/g.

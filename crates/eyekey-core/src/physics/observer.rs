@@ -194,6 +194,6 @@ impl WaveObserver {
 pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm: f64) -> u32 {
     let d = display.viewing_distance_mm;
     let spread = 1.22 * wavelength_nm * 1e-6 * d / display.hole_diameter_mm;
-    let per_block = display.hole_pitch_mm * (1.0 + display.gap_mm / d) * d / display.gap_mm;
+    let per_block = display.block_shift_at_pupil_mm(d);
     (((spread + pupil_mm / 2.0) / per_block).ceil() as u32 + 1).min(16)
 }

@@ -62,11 +62,12 @@ impl Resolvability {
             .projectors
             .iter()
             .map(|p| {
-                let lambda_mm = p.centroid_nm() * 1e-6;
+                let wavelength_nm = p.centroid_nm();
+                let lambda_mm = wavelength_nm * 1e-6;
                 let cell = (lambda_mm * d / a).max(s);
                 let across = |pupil_mm: f64| ((pupil_mm / cell).floor() as u32).clamp(1, display.views_u.max(1));
                 BandResolvability {
-                    wavelength_nm: p.centroid_nm(),
+                    wavelength_nm,
                     view_spacing_mm: s,
                     view_spread_mm: spread_factor * lambda_mm * d / a,
                     resolvability: a * s / (lambda_mm * d),

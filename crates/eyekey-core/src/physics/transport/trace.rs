@@ -86,7 +86,7 @@ struct Tracer<'a> {
     /// Retinal pixels of landing shift per unit of ∂W/∂ρ (µm).
     shift_per_grad: f64,
     /// Diffraction-angle tables, for a wave-optics build.
-    sampler: Option<DiffractionSampler>,
+    sampler: Option<&'static DiffractionSampler>,
     /// A wave-optics build's weight of one sub-ray (the same for every aperture: physical brightness).
     wave_weight: f64,
 }
@@ -110,9 +110,7 @@ impl Tracer<'_> {
         let (nb, kx, ky) = match self.options.wave {
             None => (0, 0, 0),
             Some(w) => {
-                let per_block =
-                    display.hole_pitch_mm * (1.0 + display.gap_mm / display.viewing_distance_mm) * self.d_eye
-                        / display.gap_mm;
+                let per_block = display.block_shift_at_pupil_mm(self.d_eye);
                 let k = |e: f64| (-e / per_block).round() as i64;
                 (w.neighbour_blocks as i64, k(self.eye.x_mm), k(self.eye.y_mm))
             }
@@ -305,7 +303,7 @@ impl Tracer<'_> {
             eye: EyePosition::default(),
             d_eye: self.display.viewing_distance_mm,
             shift_per_grad: self.shift_per_grad / self.d_eye * self.display.viewing_distance_mm,
-            sampler: self.sampler.clone(),
+            sampler: self.sampler,
             term_polys: Vec::new(),
             poly: self.poly.clone(),
             ..*self
@@ -410,7 +408,7 @@ impl TransportMatrix {
                 .collect(),
             // Eq. 9 in display-plane units: landing = s + d·∇W, with ∇W in mrad = (1/r_p)·∂W/∂ρ (µm/mm).
             shift_per_grad: d_eye * 1e-3 / grid.pixel_mm / r_p,
-            sampler: options.wave.map(|_| DiffractionSampler::new()),
+            sampler: options.wave.map(|_| DiffractionSampler::shared()),
             wave_weight: 0.0,
         };
         let tracer = Tracer {
