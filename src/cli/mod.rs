@@ -178,6 +178,10 @@ pub struct EncodeArgs {
     /// Encoder.
     #[arg(long, value_enum, default_value = "multiplex")]
     pub method: Method,
+    /// Forward model the encoder inverts: wave (diffraction at the apertures, the eye's chromatic defocus,
+    /// light through neighbouring blocks) or geometric (the paper's straight rays).
+    #[arg(long, value_enum, default_value = "wave")]
+    pub optics: Optics,
     /// Ablation: optical or spectral.
     #[arg(long, value_enum)]
     pub ablation: Option<Ablation>,
@@ -234,6 +238,9 @@ pub struct EvaluateArgs {
     /// Legibility threshold.
     #[arg(long, default_value_t = eyekey_core::evaluation::DEFAULT_THRESHOLD)]
     pub threshold: f64,
+    /// Forward model of every simulated view: wave or geometric.
+    #[arg(long, value_enum, default_value = "wave")]
+    pub optics: Optics,
     /// Output directory (report.json, views/).
     #[arg(long)]
     pub out: PathBuf,
@@ -317,9 +324,9 @@ pub struct SimulateArgs {
     /// Change of viewing distance, mm (positive = farther than the display's design distance).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub eye_z: f64,
-    /// Forward model: geometric (what the encoder assumes today) or wave (diffraction, chromatic defocus,
-    /// light through neighbouring blocks, physical brightness).
-    #[arg(long, value_enum, default_value = "geometric")]
+    /// Forward model: wave (diffraction, chromatic defocus, light through neighbouring blocks, physical
+    /// brightness) or geometric (the paper's straight rays).
+    #[arg(long, value_enum, default_value = "wave")]
     pub optics: Optics,
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
@@ -487,21 +494,9 @@ fn simulate(a: &SimulateArgs) -> Result<()> {
         (None, None) => bail!("give --image or --frames"),
     };
     let cache = TransportCache::disabled();
-    let (picture, transports) = match a.optics {
-        Optics::Geometric => {
-            let observer = Observer::new(&display, &profile, eye, &options, &cache)?;
-            (observer.picture(&observer.view(&l)), vec![observer.transport])
-        }
-        Optics::Wave => {
-            let observer =
-                eyekey_core::physics::observer::WaveObserver::new(&display, &profile, eye, &options, &cache)?;
-            let view = observer.view(&l);
-            (
-                observer.picture(&view),
-                observer.bands.into_iter().map(|b| b.transport).collect(),
-            )
-        }
-    };
+    let observer = Observer::new(&display, &profile, eye, &options, a.optics, &cache)?;
+    let picture = observer.picture(&observer.view(&l));
+    let transports = observer.transports;
     imaging::save_rgb_png(&picture, &a.out)?;
     let (traced, entered): (u64, u64) = transports.iter().fold((0, 0), |(t, e), tr| {
         (t + tr.stats.sub_rays_traced, e + tr.stats.sub_rays_in_pupil)
@@ -538,7 +533,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     }
     let display = read_display(&a.display)?;
     if let Some(w) = eyekey_core::physics::resolvability::Resolvability::of(&display).warning() {
-        eprintln!("warning: {w}; frames are computed for the geometric model (see `eyekey display check`)");
+        eprintln!("warning: {w} (see `eyekey display check`)");
     }
     let target = read_profile(&a.target)?;
     let observers = a.observer.iter().map(|p| read_profile(p)).collect::<Result<Vec<_>>>()?;
@@ -547,6 +542,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     let d = EncodeOptions::default();
     let options = EncodeOptions {
         method: a.method,
+        optics: a.optics,
         ablation: a.ablation,
         population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
         decoy: match (a.decoy_kind, &decoy) {
@@ -617,6 +613,7 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         population: a.population,
         seed: a.seed,
         threshold: a.threshold,
+        optics: a.optics,
         ..Default::default()
     };
     let bar = progress_bar("evaluating");

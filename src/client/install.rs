@@ -7,7 +7,7 @@ use super::error::{error_chain, io_err, ClientError};
 use super::{CURRENT_DIR, PREVIEW_FILE, PREVIOUS_DIR};
 use crate::service::routes::frames::FrameJob;
 use eyekey_core::bundle::{self, MANIFEST_FILE};
-use eyekey_core::physics::observer::Observer;
+use eyekey_core::physics::observer::{Observer, Optics};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportOptions};
 
@@ -149,12 +149,23 @@ fn write_preview(
         profile,
         EyePosition::default(),
         &options,
+        bundle_optics(manifest),
         &eyekey_core::physics::transport::TransportCache::disabled(),
     )
     .map_err(|e| ClientError::Preview(e.to_string()))?;
     let picture = observer.picture(&observer.view(light_field));
     eyekey_core::imaging::save_rgb_png(&picture, &staging.join(PREVIEW_FILE))
         .map_err(|e| ClientError::Preview(error_chain(&e)))
+}
+
+/// The forward model a bundle's frames were encoded under, from its manifest's encoder options; bundles
+/// from before eyekey modelled diffraction name none and were encoded under geometric optics.
+fn bundle_optics(manifest: &bundle::Manifest) -> Optics {
+    manifest
+        .encoder
+        .get("optics")
+        .and_then(|v| serde_json::from_value(v.clone()).ok())
+        .unwrap_or(Optics::Geometric)
 }
 
 /// The swap: `previous` is dropped, `current` becomes `previous`, the staging directory becomes `current`.

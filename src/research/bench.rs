@@ -17,7 +17,7 @@ use eyekey_core::encoding::objectives::{noise_decoy, MultiplexObjective, Term};
 use eyekey_core::encoding::pipeline::{self, EncodeOptions, JobSpec};
 use eyekey_core::encoding::solver::{minimise, Objective, SolverOptions};
 use eyekey_core::physics::display::DisplayGeometry;
-use eyekey_core::physics::observer::Observer;
+use eyekey_core::physics::observer::{Observer, Optics};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportMatrix, TransportOptions};
 
@@ -228,9 +228,9 @@ impl BenchProblem {
         ));
         let observers = people
             .iter()
-            .map(|p| Observer::new(display, p, EyePosition::default(), &opts, &TransportCache::disabled()))
+            .map(|p| Observer::new(display, p, EyePosition::default(), &opts, Optics::Geometric, &TransportCache::disabled()))
             .collect::<Result<Vec<_>, _>>()?;
-        let g = observers[0].transport.grid;
+        let g = observers[0].grid();
         let doc = eyekey_core::imaging::glyphs::render_text(
             &["PIN", "4821"],
             g.width * 4,
@@ -274,13 +274,13 @@ impl BenchProblem {
     pub fn export(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir)?;
         let n = self.observers[0].coupling.len();
-        let cols = self.observers[0].transport.n_samples() * n;
+        let cols = self.observers[0].n_samples() * n;
         let scale = (1.0 / self.energy).sqrt();
         let mut entries: Vec<(usize, usize, f64)> = Vec::new();
         let mut b: Vec<f64> = Vec::new();
         let mut row0 = 0;
         for (o, obj) in self.observers.iter().zip(&self.objectives) {
-            let m = &o.transport.forward;
+            let m = &o.transports[0].forward;
             for r in 0..m.n_rows {
                 for e in m.indptr[r] as usize..m.indptr[r + 1] as usize {
                     let (c, v) = (m.indices[e] as usize, m.values[e] as f64);

@@ -25,7 +25,7 @@ use rand::{Rng, SeedableRng};
 use eyekey_core::encoding::pipeline::{encode, DecoyKind, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
 use eyekey_core::evaluation::{luminance, stretch_to_unit, Reference, DEFAULT_THRESHOLD};
 use eyekey_core::physics::display::DisplayGeometry;
-use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
+use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::population::{sample_person, SamplingScope};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportOptions};
@@ -160,7 +160,7 @@ impl<'a> ViewWriter<'a> {
 
 /// Scores what observer `o` sees of light field `l` against `doc`: (legibility, NCC, the view's luminance).
 fn score(doc: &RgbImage, o: &Observer, l: &[f32]) -> (f64, f64, Vec<f32>) {
-    let g = o.transport.grid;
+    let g = o.grid();
     let reference = Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
     let lum = luminance(&o.view(l));
     let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
@@ -232,6 +232,7 @@ impl<'a> Views<'a> {
             person,
             EyePosition::default(),
             &self.topts,
+            Optics::Geometric,
             &self.cache,
         )?)
     }

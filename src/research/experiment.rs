@@ -17,7 +17,7 @@ use eyekey_core::encoding::pipeline::{
 };
 use eyekey_core::evaluation::{evaluate, Evaluation, EvaluationOptions, PopulationSummary, Reference, Report};
 use eyekey_core::physics::display::DisplayGeometry;
-use eyekey_core::physics::observer::{plain_light_field_for_image, Observer};
+use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::spectral::{ObserverParameters, SpectralSensitivity};
 use eyekey_core::physics::transport::{EyePosition, TransportOptions};
@@ -137,9 +137,9 @@ impl PaperSetup {
         };
         let viewers: Vec<Observer> = observers
             .iter()
-            .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts, &cache))
+            .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts, Optics::Geometric, &cache))
             .collect::<Result<_, _>>()?;
-        let grid = viewers[0].transport.grid;
+        let grid = viewers[0].grid();
         let reference_at = |level: f64| {
             Reference::new(
                 &document,

@@ -1,8 +1,9 @@
-//! `eyekey experiment wave`: what frames computed under the geometric model look like under wave optics.
+//! `eyekey experiment wave`: frames encoded under each forward model, seen under both.
 //!
-//! Encodes a PIN slip for a sampled target with the geometric model the encoder uses today, then scores what the
-//! target and a bystander at the target's seat see, and what the target sees of the plain document, under the
-//! geometric and the wave model (docs/design.md §2). The wave figures are what a real rig would show.
+//! Encodes a PIN slip for a sampled target twice, inverting the geometric model and the wave model, then scores
+//! what the target and a bystander at the target's seat see of each, and what the target sees of the plain
+//! document, under the geometric and the wave model (docs/design.md §2.7). The wave figures are what a real rig
+//! would show.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -14,7 +15,7 @@ use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_
 use eyekey_core::evaluation::{Reference, DEFAULT_THRESHOLD};
 use eyekey_core::imaging::save_rgb_png;
 use eyekey_core::physics::display::DisplayGeometry;
-use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, WaveObserver};
+use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::population::sample_population;
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::resolvability::Resolvability;
@@ -39,19 +40,18 @@ fn score(
     cache: &TransportCache,
 ) -> Result<Scored> {
     // The evaluation's own jitter seed, never the encoder's.
-    // Wave builds trace every aperture's neighbouring blocks too, so fewer sub-rays each keep it to minutes.
     let topts = TransportOptions {
-        sub_rays: 6,
+        sub_rays: 16,
         seed: 0xE7A1,
         ..Default::default()
     };
     let eye = EyePosition::default();
-    let g = Observer::new(display, person, eye, &topts, cache)?;
-    let grid = g.transport.grid;
+    let g = Observer::new(display, person, eye, &topts, Optics::Geometric, cache)?;
+    let grid = g.grid();
     let reference = Reference::new(document, grid.width, grid.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
     let (gs, gpic) = reference.score_observer(name, &g, l);
     save_rgb_png(&gpic, &out.join(format!("{name}_geometric.png")))?;
-    let w = WaveObserver::new(display, person, eye, &topts, cache)?;
+    let w = Observer::new(display, person, eye, &topts, Optics::Wave, cache)?;
     let view = w.view(l);
     let ws = reference.score_lms(name, &view, w.white);
     save_rgb_png(&w.picture(&view), &out.join(format!("{name}_wave.png")))?;
@@ -76,37 +76,42 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
         observers: Vec::new(),
         document: document.clone(),
         decoy: None,
-        options: EncodeOptions::default(),
+        // Encoded as eyekey did before it modelled diffraction, to measure what that model promised.
+        options: EncodeOptions {
+            optics: Optics::Geometric,
+            ..Default::default()
+        },
     };
-    let encoded = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+    let geometric = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+    let wave_spec = JobSpec {
+        options: EncodeOptions {
+            optics: Optics::Wave,
+            ..spec.options.clone()
+        },
+        ..spec.clone()
+    };
+    let wave = encode(&wave_spec, &cache, &|_| {}, &AtomicBool::new(false))?;
     let plain = plain_light_field_for_image(display, &document);
-    let rows = [
-        (
-            "target, plain document",
-            score(display, &target, &plain, &document, out, "target_plain", &cache)?,
-        ),
-        (
-            "target, encoded frames",
-            score(display, &target, &encoded.light_field, &document, out, "target", &cache)?,
-        ),
-        (
-            "bystander at the target's seat, encoded frames",
-            score(
-                display,
-                &bystander,
-                &encoded.light_field,
-                &document,
-                out,
-                "bystander",
-                &cache,
-            )?,
-        ),
-    ];
+    let mut rows = vec![(
+        "target, plain document".to_string(),
+        score(display, &target, &plain, &document, out, "target_plain", &cache)?,
+    )];
+    for (model, encoded) in [("geometric", &geometric), ("wave", &wave)] {
+        let l = &encoded.light_field;
+        rows.push((
+            format!("target, frames encoded under {model} optics"),
+            score(display, &target, l, &document, out, &format!("target_{model}_frames"), &cache)?,
+        ));
+        rows.push((
+            format!("bystander at the target's seat, frames encoded under {model} optics"),
+            score(display, &bystander, l, &document, out, &format!("bystander_{model}_frames"), &cache)?,
+        ));
+    }
     let r = Resolvability::of(display);
     let m: Vec<String> = r.bands.iter().map(|b| format!("{:.2}", b.resolvability)).collect();
     let mut md = format!(
         "Preset `{label}` ({} holes of {:.3} mm, {}×{} views, {} mm), resolvability M per band: {}. Frames encoded \
-         with the geometric model (multiplex, {} population decoys, {} iterations); legibility threshold \
+         under each model (multiplex, {} population decoys, {}/{} iterations); legibility threshold \
          {DEFAULT_THRESHOLD}.\n\n| viewer | legibility, geometric | legibility, wave |\n| --- | --- | --- |\n",
         display.aperture.as_str(),
         display.hole_diameter_mm,
@@ -115,7 +120,8 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
         display.viewing_distance_mm,
         m.join(", "),
         spec.options.population_decoys,
-        encoded.solver.iterations
+        geometric.solver.iterations,
+        wave.solver.iterations
     );
     for (name, s) in &rows {
         writeln!(md, "| {name} | {:.2} | {:.2} |", s.geometric, s.wave)?;

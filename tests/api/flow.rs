@@ -142,10 +142,11 @@ async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
         &crate::helpers::myope(),
         eyekey_core::physics::transport::EyePosition::default(),
         &transport,
+        options.optics,
         &eyekey_core::physics::transport::TransportCache::disabled(),
     )
     .unwrap();
-    let grid = observer.transport.grid;
+    let grid = observer.grid();
     let document = image::load_from_memory(&crate::helpers::document_png(24, 24))
         .unwrap()
         .to_rgb8();

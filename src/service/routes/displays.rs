@@ -36,6 +36,10 @@ pub enum Preset {
     Secure,
     /// 24×24 holes, 5×5 views: for tests and demos.
     Small,
+    /// 48×48 lenslets of 1 mm, 9×9 views: resolves its views under diffraction.
+    Lenslet,
+    /// 48×48 holes of 0.15 mm, 5×5 views 2.5 mm apart: resolves its views under diffraction.
+    Pinhole,
 }
 
 /// Body of a registration: a name and either a preset or a full geometry.

@@ -51,9 +51,9 @@ impl<'a> MultiplexObjective<'a> {
     /// Tikhonov weight μ applies to the mean square of L.
     pub fn new(terms: Vec<Term<'a>>, n_bands: usize, reference_energy: f64, tikhonov: f64) -> Self {
         assert!(!terms.is_empty(), "at least one observer");
-        let n_unknowns = terms[0].observer.transport.n_samples() * n_bands;
+        let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
-        let n_pixels = terms.iter().map(|t| t.observer.transport.n_pixels()).max().unwrap_or(0);
+        let n_pixels = terms.iter().map(|t| t.observer.n_pixels()).max().unwrap_or(0);
         Self {
             terms,
             n_unknowns,
@@ -102,14 +102,14 @@ impl Objective for MultiplexObjective<'_> {
             .for_each(|(g, x)| *g = 2.0 * mu * x);
         f += self.tikhonov * sq_norm(l);
         for t in &self.terms {
-            let tr = &t.observer.transport;
-            let img = &mut image[..tr.n_pixels() * 3];
-            tr.forward_lms(l, &t.observer.coupling, img);
+            let o = t.observer;
+            let img = &mut image[..o.n_pixels() * 3];
+            o.forward_lms(l, img);
             img.par_iter_mut()
                 .zip(t.objective.par_iter())
                 .for_each(|(a, b)| *a -= b);
             f += t.weight * self.scale * sq_norm(img);
-            tr.adjoint_lms(img, &t.observer.coupling, field);
+            o.adjoint_lms(img, field);
             let c = (2.0 * t.weight * self.scale) as f32;
             grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g += c * v);
         }
@@ -124,10 +124,10 @@ impl Objective for MultiplexObjective<'_> {
             .zip(v.par_iter())
             .for_each(|(o, x)| *o = 2.0 * mu * x);
         for t in &self.terms {
-            let tr = &t.observer.transport;
-            let img = &mut image[..tr.n_pixels() * 3];
-            tr.forward_lms(v, &t.observer.coupling, img);
-            tr.adjoint_lms(img, &t.observer.coupling, field);
+            let o = t.observer;
+            let img = &mut image[..o.n_pixels() * 3];
+            o.forward_lms(v, img);
+            o.adjoint_lms(img, field);
             let c = (2.0 * t.weight * self.scale) as f32;
             out.par_iter_mut().zip(field.par_iter()).for_each(|(o, x)| *o += c * x);
         }
@@ -162,16 +162,16 @@ impl<'a> DiffMaxObjective<'a> {
 
     /// (‖∂S_t/∂W‖², ‖∂S_t/∂c‖²) at `l`, unnormalised.
     pub fn derivative_norms(&self, l: &[f32]) -> (f64, f64) {
-        let tr = &self.target.transport;
-        let mut img = vec![0f32; tr.n_pixels() * 3];
+        let t = self.target;
+        let mut img = vec![0f32; t.n_pixels() * 3];
         let mut dw = 0.0;
-        for k in 0..tr.derivative_terms.len() {
-            tr.derivative_forward_lms(k, l, &self.target.coupling, &mut img);
+        for k in 0..t.derivative_terms().len() {
+            t.forward_with(Some(k), l, &t.coupling, &mut img);
             dw += sq_norm(&img);
         }
         let mut dc = 0.0;
         for sel in self.band_selectors() {
-            tr.forward_lms(l, &sel, &mut img);
+            t.forward_with(None, l, &sel, &mut img);
             dc += 3.0 * sq_norm(&img);
         }
         (dw, dc)
@@ -203,16 +203,16 @@ impl Objective for DiffMaxObjective<'_> {
 
     fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
         let mut f = self.data.value_and_gradient(l, grad);
-        let tr = &self.target.transport;
-        let mut img = vec![0f32; tr.n_pixels() * 3];
+        let t = self.target;
+        let mut img = vec![0f32; t.n_pixels() * 3];
         let mut field = vec![0f32; l.len()];
         // −λ_W Σ_j ‖D_j L‖²: gradient −2λ_W Σ_j D_jᵀ D_j L.
         if self.lambda_w != 0.0 {
             let c = (2.0 * self.lambda_w * self.scale) as f32;
-            for k in 0..tr.derivative_terms.len() {
-                tr.derivative_forward_lms(k, l, &self.target.coupling, &mut img);
+            for k in 0..t.derivative_terms().len() {
+                t.forward_with(Some(k), l, &t.coupling, &mut img);
                 f -= self.lambda_w * self.scale * sq_norm(&img);
-                tr.derivative_adjoint_lms(k, &img, &self.target.coupling, &mut field);
+                t.adjoint_with(Some(k), &img, &t.coupling, &mut field);
                 grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g -= c * v);
             }
         }
@@ -220,9 +220,9 @@ impl Objective for DiffMaxObjective<'_> {
         if self.lambda_c != 0.0 {
             let c = (6.0 * self.lambda_c * self.scale) as f32;
             for sel in self.band_selectors() {
-                tr.forward_lms(l, &sel, &mut img);
+                t.forward_with(None, l, &sel, &mut img);
                 f -= 3.0 * self.lambda_c * self.scale * sq_norm(&img);
-                tr.adjoint_lms(&img, &sel, &mut field);
+                t.adjoint_with(None, &img, &sel, &mut field);
                 grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g -= c * v);
             }
         }
@@ -310,6 +310,7 @@ pub fn noise_decoy(width: u32, height: u32, block: u32, seed: u64) -> image::Rgb
 mod tests {
     use super::*;
     use crate::encoding::solver::{minimise, SolverOptions};
+    use crate::physics::observer::Optics;
     use crate::physics::profile::VisionProfile;
     use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
     use std::sync::atomic::AtomicBool;
@@ -323,7 +324,7 @@ mod tests {
         }
     }
 
-    fn observer(d: &DisplayGeometry, c4: f64, c7: f64, terms: Vec<usize>) -> Observer {
+    fn observer(d: &DisplayGeometry, c4: f64, c7: f64, terms: Vec<usize>, optics: Optics) -> Observer {
         let mut p = VisionProfile::perfect();
         p.zernike_um[4] = c4;
         p.zernike_um[7] = c7;
@@ -332,7 +333,7 @@ mod tests {
             derivative_terms: terms,
             ..Default::default()
         };
-        Observer::new(d, &p, EyePosition::default(), &opts, &TransportCache::disabled()).unwrap()
+        Observer::new(d, &p, EyePosition::default(), &opts, optics, &TransportCache::disabled()).unwrap()
     }
 
     fn fd_check(obj: &dyn Objective, x: &[f32]) {
@@ -350,12 +351,20 @@ mod tests {
 
     #[test]
     fn multiplex_and_diffmax_gradients_match_finite_differences() {
+        // Under both forward models: wave optics gives every band its own operator (and its own ∂T/∂W_j).
+        for optics in [Optics::Geometric, Optics::Wave] {
+            check_gradients(optics);
+        }
+    }
+
+    fn check_gradients(optics: Optics) {
         let d = small_display();
-        let t = observer(&d, 0.1, 0.2, vec![4, 7, 12]);
-        let r = observer(&d, -0.3, 0.0, vec![]);
-        let n = t.transport.n_samples() * d.n_bands();
+        let t = observer(&d, 0.1, 0.2, vec![4, 7, 12], optics);
+        let r = observer(&d, -0.3, 0.0, vec![], optics);
+        assert_eq!(t.per_band(), optics == Optics::Wave);
+        let n = t.n_samples() * d.n_bands();
         let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
-        let obj_t: Vec<f32> = (0..t.transport.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
+        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
         let energy = obj_t.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
         let mk = || {
             MultiplexObjective::new(
@@ -367,7 +376,7 @@ mod tests {
                     },
                     Term {
                         observer: &r,
-                        objective: vec![0.2; r.transport.n_pixels() * 3],
+                        objective: vec![0.2; r.n_pixels() * 3],
                         weight: 0.5,
                     },
                 ],
@@ -389,9 +398,9 @@ mod tests {
         // Paper Fig. 11 in miniature: target and representative differ by 1 D of defocus; each is asked for a
         // different half-tone pattern, and each must end up closer to its own objective than to the other's.
         let d = small_display();
-        let t = observer(&d, 0.0, 0.0, vec![]);
-        let r = observer(&d, 1.3, 0.0, vec![]);
-        let np = t.transport.n_pixels();
+        let t = observer(&d, 0.0, 0.0, vec![], Optics::Geometric);
+        let r = observer(&d, 1.3, 0.0, vec![], Optics::Geometric);
+        let np = t.n_pixels();
         let pat_a: Vec<f32> = (0..np * 3).map(|i| if (i / 3) % 2 == 0 { 0.5 } else { 0.1 }).collect();
         let pat_b: Vec<f32> = (0..np * 3)
             .map(|i| if (i / 3 / 10) % 2 == 0 { 0.5 } else { 0.1 })

@@ -1,6 +1,7 @@
 //! What an encode is asked to do: the encoder, its decoys and ablations, and the solver's limits.
 
 use crate::physics::display::DisplayGeometry;
+use crate::physics::observer::Optics;
 use serde::{Deserialize, Serialize};
 
 use super::job::PipelineError;
@@ -56,6 +57,9 @@ pub enum DecoyKind {
 pub struct EncodeOptions {
     /// The encoder.
     pub method: Method,
+    /// The forward model the encoder (and the job's evaluation) uses: `wave` (diffraction at the apertures,
+    /// the eye's chromatic defocus; docs/design.md §2.7) or `geometric` (the paper's straight rays).
+    pub optics: Optics,
     /// Optional ablation.
     pub ablation: Option<Ablation>,
     /// Decoy observers sampled from the population, each shown a decoy (0 = only the given observers).
@@ -98,6 +102,7 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         Self {
             method: Method::Multiplex,
+            optics: Optics::Wave,
             ablation: None,
             population_decoys: 6,
             decoy: DecoyKind::Noise,

@@ -14,7 +14,7 @@ use super::solver::{minimise, Objective, Progress, SolveResult, SolverOptions, T
 use crate::evaluation::attackers::{camera_lens, head_ring, one_band_observers};
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::display::DisplayGeometry;
-use crate::physics::observer::{plain_light_field_for_image, Observer};
+use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer};
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
 use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportOptions};
@@ -45,7 +45,7 @@ pub fn encode(
         o.adaptive_rounds
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
-    let g = cast.target.transport.grid;
+    let g = cast.target.grid();
     let reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
     let mut summary = SolverSummary {
         algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
@@ -170,7 +170,7 @@ impl Cast {
             derivative_terms: if diffmax { DIFFMAX_TERMS.collect() } else { vec![] },
             ..base_transport(o)
         };
-        let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, cache)
+        let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, o.optics, cache)
             .map_err(|e| PipelineError::invalid("target profile", e.to_string()))?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
@@ -190,7 +190,7 @@ impl Cast {
             }
         }
         cast.decoy_objectives = (0..cast.others.len())
-            .map(|k| cast.others[k].objective(&decoy_image(spec, cast.target.transport.grid, k), OBJECTIVE_LEVEL))
+            .map(|k| cast.others[k].objective(&decoy_image(spec, cast.target.grid(), k), OBJECTIVE_LEVEL))
             .collect();
         Ok(cast)
     }
@@ -231,10 +231,11 @@ impl Cast {
         field: String,
     ) -> Result<Observer, PipelineError> {
         let d = &spec.display;
-        let observer = Observer::new(d, person, EyePosition::default(), &base_transport(&spec.options), cache)
+        let o = &spec.options;
+        let observer = Observer::new(d, person, EyePosition::default(), &base_transport(o), o.optics, cache)
             .map_err(|e| PipelineError::invalid(field, e.to_string()))?;
-        Ok(if spec.options.ablation == Some(Ablation::Optical) {
-            Observer::with_coupling(observer.transport.clone(), self.target.coupling_f64.clone(), d.l_max)
+        Ok(if o.ablation == Some(Ablation::Optical) {
+            Observer::with_coupling(observer.transports.clone(), self.target.coupling_f64.clone(), d.l_max)
         } else {
             observer
         })
@@ -272,7 +273,7 @@ impl Cast {
             if legibility < 0.8 * reference.threshold {
                 break;
             }
-            let decoy = decoy_image(spec, self.target.transport.grid, self.others.len());
+            let decoy = decoy_image(spec, self.target.grid(), self.others.len());
             self.decoy_objectives.push(observer.objective(&decoy, OBJECTIVE_LEVEL));
             self.others.push(observer);
             added += 1;
@@ -291,7 +292,8 @@ fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Obse
     head_ring(r)
         .into_iter()
         .map(|eye| {
-            Observer::new(&spec.display, &spec.target, eye, &base_transport(&spec.options), cache)
+            let o = &spec.options;
+            Observer::new(&spec.display, &spec.target, eye, &base_transport(o), o.optics, cache)
                 .map_err(|e| PipelineError::invalid("target profile", e.to_string()))
         })
         .collect()
@@ -303,10 +305,10 @@ fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>
     let mut out = Vec::new();
     for focus in [-0.5, 0.5] {
         let lens = camera_lens(focus, 6.0);
-        let transport = cache
-            .get_or_build(d, &lens, EyePosition::default(), &base_transport(&spec.options))
+        let o = &spec.options;
+        let transports = transports(d, Lens::Achromat(&lens), EyePosition::default(), &base_transport(o), o.optics, cache)
             .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
-        out.extend(one_band_observers(transport, d));
+        out.extend(one_band_observers(transports, d));
     }
     Ok(out)
 }
@@ -523,6 +525,7 @@ fn evaluate_job(
         population: spec.options.evaluation_population,
         seed: spec.options.seed.wrapping_add(20_000),
         sub_rays: spec.options.sub_rays,
+        optics: spec.options.optics,
         ..Default::default()
     };
     let labelled: Vec<(String, VisionProfile)> = spec

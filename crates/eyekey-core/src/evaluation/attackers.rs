@@ -43,11 +43,11 @@ fn one_band_coupling(n_bands: usize, band: usize) -> Vec<[f64; 3]> {
 }
 
 /// One observer per projector band: the camera behind a filter that passes that band alone.
-pub(crate) fn one_band_observers(transport: Arc<TransportMatrix>, display: &DisplayGeometry) -> Vec<Observer> {
+pub(crate) fn one_band_observers(transports: Vec<Arc<TransportMatrix>>, display: &DisplayGeometry) -> Vec<Observer> {
     (0..display.n_bands())
         .map(|band| {
             Observer::with_coupling(
-                transport.clone(),
+                transports.clone(),
                 one_band_coupling(display.n_bands(), band),
                 display.l_max,
             )

@@ -2,7 +2,7 @@
 
 use crate::evaluation::{median, EvaluationError, EvaluationOptions, KeySensitivity, Reference};
 use crate::physics::display::DisplayGeometry;
-use crate::physics::observer::Observer;
+use crate::physics::observer::{Lens, Observer};
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::{coupling, sample_observer_parameters, ConeFundamentals, SpectralSensitivity};
 use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
@@ -83,6 +83,16 @@ impl KeySensitivityProbe<'_> {
         })
     }
 
+    /// The target's eye with wavefront `w` (measured at the profile's reference wavelength) and cones `cones`.
+    fn observer(&self, w: &ZernikeCoefficients, cones: &ConeFundamentals) -> Result<Observer, EvaluationError> {
+        let lens = Lens::Eye {
+            wavefront: w,
+            reference_nm: self.target.reference_wavelength(),
+        };
+        let eye = EyePosition::default();
+        Ok(Observer::from_parts(self.display, lens, cones, eye, self.topts, self.options.optics, self.cache)?)
+    }
+
     /// Legibility along random directions in the wavefront terms; returns it and each direction's radius.
     fn optical(
         &self,
@@ -102,7 +112,7 @@ impl KeySensitivityProbe<'_> {
                 for (k, j) in TERMS.enumerate() {
                     w.coefficients_um[j] += step * dir[k];
                 }
-                let o = Observer::from_parts(self.display, &w, cones, EyePosition::default(), self.topts, self.cache)?;
+                let o = self.observer(&w, cones)?;
                 legs.push(self.reference.score_observer("", &o, self.l).0.legibility);
             }
             radii.push(self.first_below(&legs, &OPTICAL_STEPS_UM));
@@ -120,7 +130,7 @@ impl KeySensitivityProbe<'_> {
         cones: &ConeFundamentals,
     ) -> Result<(Vec<Vec<f64>>, Vec<f64>), EvaluationError> {
         let d = self.display;
-        let t_obs = Observer::from_parts(d, base_w, cones, EyePosition::default(), self.topts, self.cache)?;
+        let t_obs = self.observer(base_w, cones)?;
         let base_params = match &self.target.spectral {
             SpectralSensitivity::Parameters(p) => p.clone(),
             SpectralSensitivity::Table { .. } => Default::default(),
@@ -138,7 +148,7 @@ impl KeySensitivityProbe<'_> {
                 let mut p = base_params.clone();
                 set_params(&mut p, &v);
                 let c = coupling(&d.projectors, &p.cone_fundamentals()).c;
-                let o = Observer::with_coupling(t_obs.transport.clone(), c, d.l_max);
+                let o = Observer::with_coupling(t_obs.transports.clone(), c, d.l_max);
                 legs.push(self.reference.score_observer("", &o, self.l).0.legibility);
             }
             radii.push(self.first_below(&legs, &SPECTRAL_STEPS_SD));

@@ -29,7 +29,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use image::{Rgb, RgbImage};
 
 use crate::physics::display::DisplayGeometry;
-use crate::physics::observer::Observer;
+use crate::physics::observer::{transports, Lens, Observer};
 use crate::physics::population::{sample_population, SamplingScope};
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
@@ -55,8 +55,8 @@ pub fn evaluate(
         seed: options.seed ^ 0xE7A1,
         ..Default::default()
     };
-    let t_obs = Observer::new(display, target, EyePosition::default(), &topts, cache)?;
-    let g = t_obs.transport.grid;
+    let t_obs = Observer::new(display, target, EyePosition::default(), &topts, options.optics, cache)?;
+    let g = t_obs.grid();
     let mut ev = Evaluator {
         display,
         l,
@@ -127,7 +127,7 @@ impl Evaluator<'_> {
     }
 
     fn observer(&self, profile: &VisionProfile, eye: EyePosition) -> Result<Observer, EvaluationError> {
-        Ok(Observer::new(self.display, profile, eye, &self.topts, self.cache)?)
+        Ok(Observer::new(self.display, profile, eye, &self.topts, self.options.optics, self.cache)?)
     }
 
     /// The given observers' scores (and a picture each).
@@ -193,15 +193,16 @@ impl Evaluator<'_> {
         for &aperture in &options.camera_apertures_mm {
             for &focus in &options.camera_focus_d {
                 self.check()?;
-                let tr = self
-                    .cache
-                    .get_or_build(
-                        display,
-                        &camera_lens(focus, aperture),
-                        EyePosition::default(),
-                        &self.topts,
-                    )
-                    .map_err(crate::physics::observer::ObserverError::from)?;
+                let lens = camera_lens(focus, aperture);
+                let tr = transports(
+                    display,
+                    Lens::Achromat(&lens),
+                    EyePosition::default(),
+                    &self.topts,
+                    options.optics,
+                    self.cache,
+                )
+                .map_err(crate::physics::observer::ObserverError::from)?;
                 for (name, c) in camera_channels(&rgb, display.n_bands()) {
                     let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
                     let view = cam.view(self.l);

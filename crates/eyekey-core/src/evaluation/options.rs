@@ -1,6 +1,7 @@
 //! What an evaluation looks at, and how hard.
 
 use crate::evaluation::DEFAULT_THRESHOLD;
+use crate::physics::observer::Optics;
 use serde::{Deserialize, Serialize};
 
 /// Options of an evaluation.
@@ -8,6 +9,8 @@ use serde::{Deserialize, Serialize};
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(default)]
 pub struct EvaluationOptions {
+    /// The forward model every simulated view uses.
+    pub optics: Optics,
     /// People sampled from the population statistics.
     pub population: u32,
     /// Seed of the population sample (different from the encoder's decoys by construction).
@@ -31,6 +34,7 @@ pub struct EvaluationOptions {
 impl Default for EvaluationOptions {
     fn default() -> Self {
         Self {
+            optics: Optics::Wave,
             population: 20,
             seed: 20_000,
             threshold: DEFAULT_THRESHOLD,

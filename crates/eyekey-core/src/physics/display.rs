@@ -106,7 +106,7 @@ pub struct DisplayGeometry {
 }
 
 /// Names of the built-in presets.
-pub const PRESETS: &[&str] = &["paper", "secure", "small"];
+pub const PRESETS: &[&str] = &["paper", "secure", "small", "lenslet", "pinhole"];
 
 impl DisplayGeometry {
     /// The paper's synthesized setup (§7.3): 100×100 holes, 5×5 views, 4 narrow-band projectors.
@@ -155,6 +155,57 @@ impl DisplayGeometry {
         }
     }
 
+    /// A lenslet display that resolves its views under diffraction (docs/design.md §2.7): 48×48 square
+    /// lenslets of 1 mm (a 48 mm square), 9×9 views, the screen at their focal plane 92.6 mm behind them.
+    ///
+    /// Views are p_s·d/f = (1/9 mm)·500/92.6 = 0.6 mm apart at the pupil, and a lenslet's diffraction spreads a
+    /// view by λd/A = 0.28 mm at 555 nm, so the resolvability A·s/(λd) is 2.2 (1.9 in the red band, 2.6 in the
+    /// blue): about 10 views across a 6 mm pupil and 6 across a 4 mm one are distinct. The price is spatial:
+    /// 1 mm pixels, because M ≤ A·s/(λd) ties the pixel size A to how finely the pupil can be sampled.
+    pub fn lenslet() -> Self {
+        let p_s = 1.0 / 9.0;
+        Self {
+            aperture: Aperture::Lenslet,
+            holes_x: 48,
+            holes_y: 48,
+            hole_pitch_mm: 1.0,
+            hole_diameter_mm: 1.0,
+            views_u: 9,
+            views_v: 9,
+            screen_pixel_pitch_mm: p_s,
+            gap_mm: p_s * 500.0 / 0.6,
+            viewing_distance_mm: 500.0,
+            projectors: crate::physics::spectral::paper_projectors(),
+            l_max: 1.0,
+        }
+    }
+
+    /// A pinhole barrier that resolves its views under diffraction: 48×48 holes of 0.15 mm at 0.75 mm pitch,
+    /// 5×5 views, gap 30 mm.
+    ///
+    /// Views are 0.15·500/30 = 2.5 mm apart at the pupil and a hole's Airy core spreads a view by
+    /// 1.22·λd/a = 2.3 mm at 555 nm, so A·s/(λd) = 1.35 (1.2 red, 1.7 blue). A barrier cannot do much better:
+    /// a hole resolves views only if a > λd/s while it must stay below a screen pixel, a < p_s = s·g/d, so
+    /// s² > λd²/g; finer view spacing needs an impractically deep gap (0.6 mm would need g ≈ 380 mm). Only
+    /// about 2 views cross a 6 mm pupil, so this display directs views to eye positions (a bystander's seat
+    /// sees other views) more than it acts on one eye's aberrations.
+    pub fn pinhole() -> Self {
+        Self {
+            aperture: Aperture::Pinhole,
+            holes_x: 48,
+            holes_y: 48,
+            hole_pitch_mm: 0.75,
+            hole_diameter_mm: 0.15,
+            views_u: 5,
+            views_v: 5,
+            screen_pixel_pitch_mm: 0.15,
+            gap_mm: 30.0,
+            viewing_distance_mm: 500.0,
+            projectors: crate::physics::spectral::paper_projectors(),
+            l_max: 1.0,
+        }
+    }
+
     /// A small display for tests and quick demos: 24×24 holes, 5×5 views, the `paper` optics.
     pub fn small() -> Self {
         Self {
@@ -165,12 +216,14 @@ impl DisplayGeometry {
         }
     }
 
-    /// A preset by name (`paper`, `secure`, `small`).
+    /// A preset by name (`paper`, `secure`, `small`, `lenslet`, `pinhole`).
     pub fn preset(name: &str) -> Result<Self, DisplayError> {
         match name {
             "paper" => Ok(Self::paper()),
             "secure" => Ok(Self::secure()),
             "small" => Ok(Self::small()),
+            "lenslet" => Ok(Self::lenslet()),
+            "pinhole" => Ok(Self::pinhole()),
             other => Err(DisplayError::UnknownPreset(other.to_string())),
         }
     }

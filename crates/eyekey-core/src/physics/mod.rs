@@ -3,6 +3,7 @@
 pub mod chromatic;
 pub mod diffraction;
 pub mod display;
+pub mod fourier;
 pub mod observer;
 pub mod population;
 pub mod profile;

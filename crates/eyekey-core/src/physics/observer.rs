@@ -10,7 +10,7 @@ use crate::physics::display::DisplayGeometry;
 use crate::physics::profile::{ProfileError, VisionProfile};
 use crate::physics::spectral::{coupling, ConeFundamentals};
 use crate::physics::transport::{
-    EyePosition, TransportCache, TransportError, TransportMatrix, TransportOptions, WaveSampling,
+    EyePosition, RetinalGrid, TransportCache, TransportError, TransportMatrix, TransportOptions, WaveSampling,
 };
 use crate::physics::zernike::ZernikeCoefficients;
 
@@ -26,11 +26,14 @@ pub enum ObserverError {
     Transport(#[from] TransportError),
 }
 
-/// One observer: transport operator plus spectral coupling.
+/// One observer: transport operators plus spectral coupling.
+///
+/// Under geometric optics one operator serves every band (Eq. 13: S_a = Σ_n c_na T L_n); under wave optics each
+/// band n has its own T_n (its wavelength's diffraction and the eye's chromatic defocus), S_a = Σ_n c_na T_n L_n.
 #[derive(Clone, Debug)]
 pub struct Observer {
-    /// Transport from the light field to this observer's retinal grid.
-    pub transport: Arc<TransportMatrix>,
+    /// Transport from the light field to this observer's retinal grid: one for all bands, or one per band.
+    pub transports: Vec<Arc<TransportMatrix>>,
     /// c_na per band n, as f32 for the kernels.
     pub coupling: Vec<[f32; 3]>,
     /// c_na per band n.
@@ -40,67 +43,217 @@ pub struct Observer {
 }
 
 impl Observer {
-    /// Builds the observer for `profile` at `eye`, taking its transport operator from `cache` (built and
-    /// stored there if absent).
+    /// Builds the observer for `profile` at `eye` under `optics`, taking its transport operators from `cache`
+    /// (built and stored there if absent).
     pub fn new(
         display: &DisplayGeometry,
         profile: &VisionProfile,
         eye: EyePosition,
         options: &TransportOptions,
+        optics: Optics,
         cache: &TransportCache,
     ) -> Result<Self, ObserverError> {
         profile.validate()?;
         let wavefront = profile.effective_wavefront()?;
-        Self::from_parts(display, &wavefront, &profile.cone_fundamentals(), eye, options, cache)
+        let lens = Lens::Eye {
+            wavefront: &wavefront,
+            reference_nm: profile.reference_wavelength(),
+        };
+        Self::from_parts(display, lens, &profile.cone_fundamentals(), eye, options, optics, cache)
     }
 
-    /// Builds an observer from a wavefront at the viewing pupil and cone fundamentals.
+    /// Builds an observer from its optics at the viewing pupil and its spectral sensitivities.
+    #[allow(clippy::too_many_arguments)]
     pub fn from_parts(
         display: &DisplayGeometry,
-        wavefront: &ZernikeCoefficients,
+        lens: Lens<'_>,
         cones: &ConeFundamentals,
         eye: EyePosition,
         options: &TransportOptions,
+        optics: Optics,
         cache: &TransportCache,
     ) -> Result<Self, ObserverError> {
-        let transport = cache.get_or_build(display, wavefront, eye, options)?;
+        let transports = transports(display, lens, eye, options, optics, cache)?;
         let c = coupling(&display.projectors, cones);
-        Ok(Self::with_coupling(transport, c.c, display.l_max))
+        Ok(Self::with_coupling(transports, c.c, display.l_max))
     }
 
-    /// An observer from a transport operator and a coupling matrix.
-    pub fn with_coupling(transport: Arc<TransportMatrix>, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
+    /// An observer from its transport operators (one, or one per band) and a coupling matrix.
+    pub fn with_coupling(transports: Vec<Arc<TransportMatrix>>, coupling_f64: Vec<[f64; 3]>, l_max: f64) -> Self {
+        assert!(
+            transports.len() == 1 || transports.len() == coupling_f64.len(),
+            "one transport, or one per band"
+        );
         let white = std::array::from_fn(|a| coupling_f64.iter().map(|c| c[a]).sum::<f64>() * l_max);
         let coupling = coupling_f64
             .iter()
             .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
             .collect();
         Self {
-            transport,
+            transports,
             coupling,
             coupling_f64,
             white,
         }
     }
 
+    /// The retinal grid (every band's operator shares it).
+    pub fn grid(&self) -> RetinalGrid {
+        self.transports[0].grid
+    }
+
+    /// Light-field samples per band.
+    pub fn n_samples(&self) -> usize {
+        self.transports[0].n_samples()
+    }
+
+    /// Retinal pixels.
+    pub fn n_pixels(&self) -> usize {
+        self.transports[0].n_pixels()
+    }
+
+    /// OSA indices of the derivatives ∂T/∂W_j its operators carry.
+    pub fn derivative_terms(&self) -> &[usize] {
+        &self.transports[0].derivative_terms
+    }
+
+    /// True when each band has its own operator (wave optics).
+    pub fn per_band(&self) -> bool {
+        self.transports.len() > 1
+    }
+
+    /// S = Σ_n c_n ⊗ T_n L_n with coupling `c` (`c[n][a]`), or with ∂T_n/∂W_term for `Some(term)` (the k-th
+    /// stored derivative): `l[p·N + n]` → `out[r·3 + a]`.
+    pub fn forward_with(&self, term: Option<usize>, l: &[f32], c: &[[f32; 3]], out: &mut [f32]) {
+        if let [t] = self.transports.as_slice() {
+            match term {
+                None => t.forward_lms(l, c, out),
+                Some(k) => t.derivative_forward_lms(k, l, c, out),
+            }
+            return;
+        }
+        for (n, t) in self.transports.iter().enumerate() {
+            t.forward_band_lms(term, l, c.len(), n, c[n], n > 0, out);
+        }
+    }
+
+    /// The adjoint of [`Self::forward_with`]: `y[r·3 + a]` → `out[p·N + n]`.
+    pub fn adjoint_with(&self, term: Option<usize>, y: &[f32], c: &[[f32; 3]], out: &mut [f32]) {
+        if let [t] = self.transports.as_slice() {
+            match term {
+                None => t.adjoint_lms(y, c, out),
+                Some(k) => t.derivative_adjoint_lms(k, y, c, out),
+            }
+            return;
+        }
+        for (n, t) in self.transports.iter().enumerate() {
+            t.adjoint_band_lms(term, y, c.len(), n, c[n], out);
+        }
+    }
+
+    /// S = (C ⊗ T)·L (Eq. 13) with this observer's coupling.
+    pub fn forward_lms(&self, l: &[f32], out: &mut [f32]) {
+        self.forward_with(None, l, &self.coupling, out);
+    }
+
+    /// The adjoint of [`Self::forward_lms`].
+    pub fn adjoint_lms(&self, y: &[f32], out: &mut [f32]) {
+        self.adjoint_with(None, y, &self.coupling, out);
+    }
+
     /// The LMS retinal image `[r·3 + a]` of light field `l`.
     pub fn view(&self, l: &[f32]) -> Vec<f32> {
-        let mut out = vec![0f32; self.transport.n_pixels() * 3];
-        self.transport.forward_lms(l, &self.coupling, &mut out);
+        let mut out = vec![0f32; self.n_pixels() * 3];
+        self.forward_lms(l, &mut out);
         out
     }
 
     /// What this observer perceives of `view`, as an sRGB picture.
     pub fn picture(&self, view: &[f32]) -> RgbImage {
-        let g = self.transport.grid;
+        let g = self.grid();
         imaging::lms_to_srgb_image(view, g.width, g.height, self.white)
     }
 
     /// The objective LMS image for this observer of an sRGB image (resized to the retinal grid).
     pub fn objective(&self, img: &RgbImage, level: f64) -> Vec<f32> {
-        let g = self.transport.grid;
+        let g = self.grid();
         let resized = imaging::resize(img, g.width, g.height);
         imaging::objective_lms(&imaging::linear_rgb(&resized), self.white, level)
+    }
+}
+
+/// The optics in front of an observer's sensor, at the viewing pupil.
+#[derive(Clone, Copy, Debug)]
+pub enum Lens<'a> {
+    /// An eye: its wavefront measured at `reference_nm`; under wave optics each band adds the eye's chromatic
+    /// defocus relative to it (Thibos et al. 1992).
+    Eye {
+        /// The wavefront at the viewing pupil.
+        wavefront: &'a ZernikeCoefficients,
+        /// The wavelength the coefficients were measured at, nm.
+        reference_nm: f64,
+    },
+    /// An achromatic lens (a camera's): the same wavefront at every wavelength.
+    Achromat(&'a ZernikeCoefficients),
+}
+
+impl Lens<'_> {
+    fn wavefront(&self) -> &ZernikeCoefficients {
+        match self {
+            Lens::Eye { wavefront, .. } => wavefront,
+            Lens::Achromat(w) => w,
+        }
+    }
+
+    /// The wavefront at `wavelength_nm`.
+    fn at(&self, wavelength_nm: f64) -> ZernikeCoefficients {
+        use crate::physics::chromatic::{chromatic_defocus_d, defocus_coefficient_um};
+        let mut z = self.wavefront().clone();
+        if let Lens::Eye { reference_nm, .. } = self {
+            let m = chromatic_defocus_d(wavelength_nm, *reference_nm);
+            z.coefficients_um[4] += defocus_coefficient_um(m, z.pupil_radius_mm());
+        }
+        z
+    }
+}
+
+/// The transport operators of `lens` at `eye`: one (geometric optics) or one per band (wave optics: each at the
+/// band's centroid wavelength, with its diffraction and the lens's chromatic defocus).
+pub fn transports(
+    display: &DisplayGeometry,
+    lens: Lens<'_>,
+    eye: EyePosition,
+    options: &TransportOptions,
+    optics: Optics,
+    cache: &TransportCache,
+) -> Result<Vec<Arc<TransportMatrix>>, TransportError> {
+    match optics {
+        Optics::Geometric => {
+            let opts = TransportOptions {
+                wave: None,
+                ..options.clone()
+            };
+            Ok(vec![cache.get_or_build(display, lens.wavefront(), eye, &opts)?])
+        }
+        Optics::Wave => {
+            let pupil_mm = 2.0 * lens.wavefront().pupil_radius_mm();
+            display
+                .projectors
+                .iter()
+                .map(|p| {
+                    let lambda = p.centroid_nm();
+                    let opts = TransportOptions {
+                        wave: Some(WaveSampling {
+                            wavelength_nm: lambda,
+                            neighbour_blocks: neighbour_blocks(display, lambda, pupil_mm, eye),
+                            kernel_rays: KERNEL_RAYS_PER_SUB_RAY * options.sub_rays,
+                        }),
+                        ..options.clone()
+                    };
+                    cache.get_or_build(display, &lens.at(lambda), eye, &opts)
+                })
+                .collect()
+        }
     }
 }
 
@@ -119,81 +272,52 @@ pub fn plain_light_field_for_image(display: &DisplayGeometry, img: &RgbImage) ->
 /// Which forward model a simulation uses (docs/design.md §2).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum Optics {
     /// Straight rays, one transport for every band, each aperture's light normalised (the paper's idealisation).
-    #[default]
     Geometric,
     /// Fraunhofer diffraction at the apertures, the eye's chromatic defocus per band, light through
     /// neighbouring blocks, physical brightness.
+    #[default]
     Wave,
 }
 
-/// An observer under wave optics: one transport per band, each at the band's centroid wavelength with the eye's
-/// chromatic defocus (Thibos et al. 1992) and the aperture's diffraction; the view is S_a = Σ_n c_na T_n L_n
-/// (paper Eq. 13 with a band-dependent T).
-#[derive(Clone, Debug)]
-pub struct WaveObserver {
-    /// One observer per band n, its coupling zero outside band n.
-    pub bands: Vec<Observer>,
-    /// The LMS of the display's white for this observer.
-    pub white: [f64; 3],
+impl Optics {
+    /// The name used in JSON and on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Optics::Geometric => "geometric",
+            Optics::Wave => "wave",
+        }
+    }
 }
 
-impl WaveObserver {
-    /// Builds the per-band transports for `profile` at `eye`.
-    pub fn new(
-        display: &DisplayGeometry,
-        profile: &VisionProfile,
-        eye: EyePosition,
-        options: &TransportOptions,
-        cache: &TransportCache,
-    ) -> Result<Self, ObserverError> {
-        profile.validate()?;
-        let c = coupling(&display.projectors, &profile.cone_fundamentals()).c;
-        let white = std::array::from_fn(|a| c.iter().map(|row| row[a]).sum::<f64>() * display.l_max);
-        let mut bands = Vec::with_capacity(display.n_bands());
-        for (n, p) in display.projectors.iter().enumerate() {
-            let lambda = p.centroid_nm();
-            let wave = WaveSampling {
-                wavelength_nm: lambda,
-                neighbour_blocks: neighbour_blocks(display, lambda, profile.pupil_diameter_mm),
-            };
-            let opts = TransportOptions {
-                wave: Some(wave),
-                ..options.clone()
-            };
-            let transport = cache.get_or_build(display, &profile.wavefront_at(lambda)?, eye, &opts)?;
-            let masked = (0..c.len()).map(|m| if m == n { c[m] } else { [0.0; 3] }).collect();
-            bands.push(Observer::with_coupling(transport, masked, display.l_max));
-        }
-        Ok(Self { bands, white })
-    }
-
-    /// The LMS retinal image `[r·3 + a]` of light field `l`.
-    pub fn view(&self, l: &[f32]) -> Vec<f32> {
-        let mut out = self.bands[0].view(l);
-        for b in &self.bands[1..] {
-            for (o, v) in out.iter_mut().zip(b.view(l)) {
-                *o += v;
-            }
-        }
-        out
-    }
-
-    /// What this observer perceives of `view`, as an sRGB picture.
-    pub fn picture(&self, view: &[f32]) -> RgbImage {
-        let g = self.bands[0].transport.grid;
-        imaging::lms_to_srgb_image(view, g.width, g.height, self.white)
-    }
-}
+/// Sub-rays per view and neighbouring block of the shift-invariant kernels (docs/design.md §2.7), per sub-ray
+/// a per-sample trace would spend on each light-field sample: at the default 16 that is 2048, whose relative
+/// Monte-Carlo noise, about 1/√(rays entering the pupil), is under 3 % for a view that lies in it; every sample
+/// shares it.
+pub const KERNEL_RAYS_PER_SUB_RAY: u32 = 128;
 
 /// Blocks on each side of the block an eye looks at through an aperture whose light can still reach a pupil
-/// of `pupil_mm`: light from k blocks over arrives k·p_h(1 + g/d)·d/g off the view's aim, so k covers the
-/// diffraction spread 1.22λd/A plus the pupil's radius, with one block to spare.
-pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm: f64) -> u32 {
+/// of `pupil_mm`: light from m blocks over arrives m·p_h(1 + g/d)·d/g off the view's aim, spread by the block's
+/// fan (its views, and the aperture's own width projected to the pupil) and by diffraction out to the radius
+/// holding 90 % of the light (2.23·λ/a for a hole's Airy pattern, λ/A per axis for a lenslet's sinc²).
+///
+/// The window is centred on the block nearest the eye's line of sight, so an eye off that line by up to half a
+/// block adds its distance from it.
+pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm: f64, eye: EyePosition) -> u32 {
     let d = display.viewing_distance_mm;
-    let spread = 1.22 * wavelength_nm * 1e-6 * d / display.hole_diameter_mm;
-    let per_block = display.block_shift_at_pupil_mm(d);
-    (((spread + pupil_mm / 2.0) / per_block).ceil() as u32 + 1).min(16)
+    let a = display.hole_diameter_mm;
+    let lambda_mm = wavelength_nm * 1e-6;
+    let (spread, aperture_half) = match display.aperture {
+        crate::physics::display::Aperture::Pinhole => (2.23 * lambda_mm * d / a, 0.5 * a * (1.0 + d / display.gap_mm)),
+        crate::physics::display::Aperture::Lenslet => (lambda_mm * d / a, 0.5 * a),
+    };
+    let views = display.views_u.max(display.views_v) as f64;
+    let fan_half = 0.5 * views * display.view_spacing_at_pupil_mm() + aperture_half;
+    let per_block = display.block_shift_at_pupil_mm(d + eye.dz_mm);
+    let residual = |e: f64| (e - (e / per_block).round() * per_block).abs();
+    let off_line = residual(eye.x_mm).hypot(residual(eye.y_mm));
+    (((pupil_mm / 2.0 + fan_half + spread + off_line) / per_block).floor() as u32).min(16)
 }

@@ -142,6 +142,27 @@ mod tests {
     }
 
     #[test]
+    fn the_lenslet_and_pinhole_presets_resolve_their_views_and_the_paper_preset_does_not() {
+        // By hand at 555 nm: lenslet 1 mm · 0.6 mm / (555e-6 · 500) = 2.16; pinhole 0.15 · 2.5 / 0.2775 = 1.35;
+        // paper 0.08 · 1.2 / 0.2775 = 0.35. The red band (the longest wavelength) is the lowest.
+        for (d, low, high) in [
+            (DisplayGeometry::lenslet(), 1.5, 3.0),
+            (DisplayGeometry::pinhole(), 1.0, 2.0),
+            (DisplayGeometry::paper(), 0.2, 0.5),
+        ] {
+            let r = Resolvability::of(&d);
+            for b in &r.bands {
+                assert!(b.resolvability > low && b.resolvability < high, "{b:?}");
+            }
+            assert_eq!(r.any_unresolved(), high < 1.0);
+        }
+        // 4 mm / 0.6 mm = 6 views across a 4 mm pupil on the lenslet display; 6 mm / 0.6 mm = 10, more than
+        // the display's 9.
+        let b = &Resolvability::of(&DisplayGeometry::lenslet()).bands[1];
+        assert_eq!((b.views_resolved.mm4, b.views_resolved.mm6), (6, 9));
+    }
+
+    #[test]
     fn the_json_has_the_documented_shape() {
         let r = Resolvability::of(&DisplayGeometry::paper());
         let v = serde_json::to_value(&r).unwrap();

@@ -85,6 +85,10 @@ pub struct WaveSampling {
     pub wavelength_nm: f64,
     /// Blocks of screen pixels on each side of an aperture's own block whose light it passes.
     pub neighbour_blocks: u32,
+    /// Sub-rays per view and neighbouring block of the shift-invariant kernels that build T at the design
+    /// distance (docs/design.md §2.7); 0, or an eye nearer or farther, traces every light-field sample with
+    /// `sub_rays` instead.
+    pub kernel_rays: u32,
 }
 
 impl Default for TransportOptions {

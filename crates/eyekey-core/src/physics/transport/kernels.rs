@@ -96,3 +96,76 @@ pub(crate) fn spmv_fixed<const NI: usize>(
             }
         });
 }
+
+/// One band of a band-dependent operator (wave optics): out[r·3 + a] (+)= c[a] Σ_e v_e · x[col_e · N + n]
+/// for band n of an N-band light field; with `accumulate` the products are added to `out`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn spmv_band_forward(
+    indptr: &[u32],
+    indices: &[u32],
+    values: &[f32],
+    x: &[f32],
+    n_bands: usize,
+    band: usize,
+    c: [f32; 3],
+    accumulate: bool,
+    out: &mut [f32],
+) {
+    let rows_per_chunk = rows_per_task(out.len() / 3);
+    out.par_chunks_mut(rows_per_chunk * 3)
+        .enumerate()
+        .for_each(|(chunk, out_rows)| {
+            let first = chunk * rows_per_chunk;
+            for (k, o) in out_rows.chunks_exact_mut(3).enumerate() {
+                let r = first + k;
+                let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
+                let (mut s0, mut s1) = (0f32, 0f32);
+                let (idx, val) = (&indices[a..b], &values[a..b]);
+                let pairs = idx.len() / 2;
+                for p in 0..pairs {
+                    s0 += val[2 * p] * x[idx[2 * p] as usize * n_bands + band];
+                    s1 += val[2 * p + 1] * x[idx[2 * p + 1] as usize * n_bands + band];
+                }
+                if idx.len() % 2 == 1 {
+                    s0 += val[val.len() - 1] * x[idx[idx.len() - 1] as usize * n_bands + band];
+                }
+                let s = s0 + s1;
+                for (slot, ca) in o.iter_mut().zip(c) {
+                    *slot = if accumulate { *slot + ca * s } else { ca * s };
+                }
+            }
+        });
+}
+
+/// The adjoint of [`spmv_band_forward`] on Tᵀ's rows: out[p·N + n] = Σ_a c[a] Σ_e v_e · y[col_e · 3 + a]; the
+/// other bands' entries of `out` are left as they are.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn spmv_band_adjoint(
+    indptr: &[u32],
+    indices: &[u32],
+    values: &[f32],
+    y: &[f32],
+    c: [f32; 3],
+    n_bands: usize,
+    band: usize,
+    out: &mut [f32],
+) {
+    let rows_per_chunk = rows_per_task(out.len() / n_bands);
+    out.par_chunks_mut(rows_per_chunk * n_bands)
+        .enumerate()
+        .for_each(|(chunk, out_rows)| {
+            let first = chunk * rows_per_chunk;
+            for (k, o) in out_rows.chunks_exact_mut(n_bands).enumerate() {
+                let r = first + k;
+                let (a, b) = (indptr[r] as usize, indptr[r + 1] as usize);
+                let mut acc = [0f32; 3];
+                for (&i, &v) in indices[a..b].iter().zip(&values[a..b]) {
+                    let yi = &y[i as usize * 3..i as usize * 3 + 3];
+                    acc[0] += v * yi[0];
+                    acc[1] += v * yi[1];
+                    acc[2] += v * yi[2];
+                }
+                o[band] = c[0] * acc[0] + c[1] * acc[1] + c[2] * acc[2];
+            }
+        });
+}

@@ -74,21 +74,21 @@ fn check_options(
 }
 
 /// What every hole's trace shares: the geometry, the eye and its wavefront.
-struct Tracer<'a> {
-    display: &'a DisplayGeometry,
-    eye: EyePosition,
-    options: &'a TransportOptions,
-    d_eye: f64,
-    grid: RetinalGrid,
-    r_p: f64,
-    poly: ZernikePolynomial,
-    term_polys: Vec<ZernikePolynomial>,
+pub(super) struct Tracer<'a> {
+    pub(super) display: &'a DisplayGeometry,
+    pub(super) eye: EyePosition,
+    pub(super) options: &'a TransportOptions,
+    pub(super) d_eye: f64,
+    pub(super) grid: RetinalGrid,
+    pub(super) r_p: f64,
+    pub(super) poly: ZernikePolynomial,
+    pub(super) term_polys: Vec<ZernikePolynomial>,
     /// Retinal pixels of landing shift per unit of ∂W/∂ρ (µm).
-    shift_per_grad: f64,
+    pub(super) shift_per_grad: f64,
     /// Diffraction-angle tables, for a wave-optics build.
-    sampler: Option<&'static DiffractionSampler>,
+    pub(super) sampler: Option<&'static DiffractionSampler>,
     /// A wave-optics build's weight of one sub-ray (the same for every aperture: physical brightness).
-    wave_weight: f64,
+    pub(super) wave_weight: f64,
 }
 
 impl Tracer<'_> {
@@ -411,6 +411,9 @@ impl TransportMatrix {
             sampler: options.wave.map(|_| DiffractionSampler::shared()),
             wave_weight: 0.0,
         };
+        if let Some(w) = options.wave.filter(|w| w.kernel_rays > 0 && eye.dz_mm == 0.0) {
+            return Self::build_shift_invariant(&tracer, w.kernel_rays);
+        }
         let tracer = Tracer {
             wave_weight: tracer.physical_weight(),
             ..tracer
@@ -420,19 +423,30 @@ impl TransportMatrix {
         let holes: Vec<HoleOut> = (0..n_holes).into_par_iter().map(|h| tracer.hole(h)).collect();
         let n_terms = tracer.term_polys.len();
         let (adjoint, t_dvalues, stats) = assemble(&holes, display.n_samples_per_band(), grid.len(), n_terms)?;
-        let (forward, map) = adjoint.transpose_with_map();
-        let derivative_forward = t_dvalues
-            .iter()
-            .map(|dv| map.iter().map(|&m| dv[m as usize]).collect())
-            .collect();
-        Ok(Self {
-            grid,
-            forward,
-            adjoint,
-            derivative_terms: options.derivative_terms.clone(),
-            derivative_forward,
-            derivative_adjoint: t_dvalues,
-            stats,
-        })
+        Ok(finish(grid, adjoint, t_dvalues, options.derivative_terms.clone(), stats))
+    }
+}
+
+/// The operator from Tᵀ and its derivative values: T and ∂T/∂W_j on T's pattern come from one transpose.
+pub(super) fn finish(
+    grid: RetinalGrid,
+    adjoint: CsrMatrix,
+    t_dvalues: Vec<Vec<f32>>,
+    derivative_terms: Vec<usize>,
+    stats: TransportStats,
+) -> TransportMatrix {
+    let (forward, map) = adjoint.transpose_with_map();
+    let derivative_forward = t_dvalues
+        .iter()
+        .map(|dv| map.iter().map(|&m| dv[m as usize]).collect())
+        .collect();
+    TransportMatrix {
+        grid,
+        forward,
+        adjoint,
+        derivative_terms,
+        derivative_forward,
+        derivative_adjoint: t_dvalues,
+        stats,
     }
 }
