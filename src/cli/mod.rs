@@ -109,6 +109,9 @@ pub enum ExperimentCommand {
         /// Display preset.
         #[arg(long, default_value = "secure")]
         preset: String,
+        /// Also compute the target's views by the independent Fourier-optics model (minutes per view).
+        #[arg(long)]
+        fourier: bool,
     },
     /// Simulated views with known text and their legibility, for calibrating the threshold against OCR
     /// (`benches/calibrate_ocr.sh`).
@@ -415,9 +418,12 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
         }
-        Command::Experiment(ExperimentCommand::Wave { out, preset }) => {
+        Command::Experiment(ExperimentCommand::Wave { out, preset, fourier }) => {
             let display = DisplayGeometry::preset(&preset)?;
-            print!("{}", crate::research::wave::run(&out.join(&preset), &display, &preset)?);
+            print!(
+                "{}",
+                crate::research::wave::run(&out.join(&preset), &display, &preset, fourier)?
+            );
         }
         Command::Experiment(ExperimentCommand::Calibrate { out, count, seed }) => {
             crate::research::calibration::calibration_views(&out, count, seed)?;

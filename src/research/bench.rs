@@ -228,7 +228,16 @@ impl BenchProblem {
         ));
         let observers = people
             .iter()
-            .map(|p| Observer::new(display, p, EyePosition::default(), &opts, Optics::Geometric, &TransportCache::disabled()))
+            .map(|p| {
+                Observer::new(
+                    display,
+                    p,
+                    EyePosition::default(),
+                    &opts,
+                    Optics::Geometric,
+                    &TransportCache::disabled(),
+                )
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let g = observers[0].grid();
         let doc = eyekey_core::imaging::glyphs::render_text(

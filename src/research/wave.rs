@@ -14,7 +14,8 @@ use anyhow::Result;
 use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
 use eyekey_core::evaluation::{Reference, DEFAULT_THRESHOLD};
 use eyekey_core::imaging::save_rgb_png;
-use eyekey_core::physics::display::DisplayGeometry;
+use eyekey_core::physics::display::{Aperture, DisplayGeometry};
+use eyekey_core::physics::fourier::{view_lms, FourierSampling};
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::population::sample_population;
 use eyekey_core::physics::profile::VisionProfile;
@@ -27,9 +28,13 @@ use super::experiment::{pin_slip, sampled_target};
 struct Scored {
     geometric: f64,
     wave: f64,
+    /// The same view by the independent Fourier-optics model, when asked for.
+    fourier: Option<f64>,
 }
 
-/// Scores `l` for `person` under both models; saves both pictures as `<name>_geometric.png` and `_wave.png`.
+/// Scores `l` for `person` under both models (and, with `fourier`, the Fourier-optics one); saves the pictures
+/// as `<name>_geometric.png`, `_wave.png` and `_fourier.png`.
+#[allow(clippy::too_many_arguments)]
 fn score(
     display: &DisplayGeometry,
     person: &VisionProfile,
@@ -38,6 +43,7 @@ fn score(
     out: &Path,
     name: &str,
     cache: &TransportCache,
+    fourier: bool,
 ) -> Result<Scored> {
     // The evaluation's own jitter seed, never the encoder's.
     let topts = TransportOptions {
@@ -55,14 +61,34 @@ fn score(
     let view = w.view(l);
     let ws = reference.score_lms(name, &view, w.white);
     save_rgb_png(&w.picture(&view), &out.join(format!("{name}_wave.png")))?;
+    let fourier = if fourier {
+        let sampling = FourierSampling {
+            n: if display.aperture == Aperture::Lenslet {
+                256
+            } else {
+                512
+            },
+            extent_mm: 6.0,
+            source_points: 2,
+        };
+        let view = view_lms(display, person, l, sampling, 1)?;
+        save_rgb_png(&w.picture(&view), &out.join(format!("{name}_fourier.png")))?;
+        Some(reference.score_lms(name, &view, w.white).legibility)
+    } else {
+        None
+    };
     Ok(Scored {
         geometric: gs.legibility,
         wave: ws.legibility,
+        fourier,
     })
 }
 
 /// Runs the check on `display` and returns the Markdown table it also writes to `out/results.md`.
-pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String> {
+///
+/// With `fourier`, the target's views are also computed by the independent Fourier-optics model
+/// ([`eyekey_core::physics::fourier::view_lms`]), minutes per view.
+pub fn run(out: &Path, display: &DisplayGeometry, label: &str, fourier: bool) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let cache = TransportCache::default();
     let target = sampled_target();
@@ -94,17 +120,44 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
     let plain = plain_light_field_for_image(display, &document);
     let mut rows = vec![(
         "target, plain document".to_string(),
-        score(display, &target, &plain, &document, out, "target_plain", &cache)?,
+        score(
+            display,
+            &target,
+            &plain,
+            &document,
+            out,
+            "target_plain",
+            &cache,
+            fourier,
+        )?,
     )];
     for (model, encoded) in [("geometric", &geometric), ("wave", &wave)] {
         let l = &encoded.light_field;
         rows.push((
             format!("target, frames encoded under {model} optics"),
-            score(display, &target, l, &document, out, &format!("target_{model}_frames"), &cache)?,
+            score(
+                display,
+                &target,
+                l,
+                &document,
+                out,
+                &format!("target_{model}_frames"),
+                &cache,
+                fourier,
+            )?,
         ));
         rows.push((
             format!("bystander at the target's seat, frames encoded under {model} optics"),
-            score(display, &bystander, l, &document, out, &format!("bystander_{model}_frames"), &cache)?,
+            score(
+                display,
+                &bystander,
+                l,
+                &document,
+                out,
+                &format!("bystander_{model}_frames"),
+                &cache,
+                false,
+            )?,
         ));
     }
     let r = Resolvability::of(display);
@@ -112,7 +165,7 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
     let mut md = format!(
         "Preset `{label}` ({} holes of {:.3} mm, {}×{} views, {} mm), resolvability M per band: {}. Frames encoded \
          under each model (multiplex, {} population decoys, {}/{} iterations); legibility threshold \
-         {DEFAULT_THRESHOLD}.\n\n| viewer | legibility, geometric | legibility, wave |\n| --- | --- | --- |\n",
+         {DEFAULT_THRESHOLD}.\n\n| viewer | legibility, geometric | legibility, wave | legibility, wave (Fourier optics) |\n| --- | --- | --- | --- |\n",
         display.aperture.as_str(),
         display.hole_diameter_mm,
         display.views_u,
@@ -124,7 +177,8 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str) -> Result<String>
         wave.solver.iterations
     );
     for (name, s) in &rows {
-        writeln!(md, "| {name} | {:.2} | {:.2} |", s.geometric, s.wave)?;
+        let f = s.fourier.map_or("–".to_string(), |v| format!("{v:.2}"));
+        writeln!(md, "| {name} | {:.2} | {:.2} | {f} |", s.geometric, s.wave)?;
     }
     std::fs::write(out.join("results.md"), &md)?;
     Ok(md)

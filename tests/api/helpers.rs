@@ -234,6 +234,8 @@ impl TestApp {
         let mut body = job_body(&f);
         body["options"]["max_iterations"] = json!(3000);
         body["options"]["tolerance"] = json!(1e-12);
+        // Its length comes from the iteration cap; the geometric model keeps it to seconds.
+        body["options"]["optics"] = json!("geometric");
         let r = self.op_post("/v1/jobs", &body).await;
         let id = expect_json(r, StatusCode::CREATED).await["id"]
             .as_str()

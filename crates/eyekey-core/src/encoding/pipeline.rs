@@ -306,8 +306,15 @@ fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>
     for focus in [-0.5, 0.5] {
         let lens = camera_lens(focus, 6.0);
         let o = &spec.options;
-        let transports = transports(d, Lens::Achromat(&lens), EyePosition::default(), &base_transport(o), o.optics, cache)
-            .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
+        let transports = transports(
+            d,
+            Lens::Achromat(&lens),
+            EyePosition::default(),
+            &base_transport(o),
+            o.optics,
+            cache,
+        )
+        .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
         out.extend(one_band_observers(transports, d));
     }
     Ok(out)

@@ -90,7 +90,15 @@ impl KeySensitivityProbe<'_> {
             reference_nm: self.target.reference_wavelength(),
         };
         let eye = EyePosition::default();
-        Ok(Observer::from_parts(self.display, lens, cones, eye, self.topts, self.options.optics, self.cache)?)
+        Ok(Observer::from_parts(
+            self.display,
+            lens,
+            cones,
+            eye,
+            self.topts,
+            self.options.optics,
+            self.cache,
+        )?)
     }
 
     /// Legibility along random directions in the wavefront terms; returns it and each direction's radius.

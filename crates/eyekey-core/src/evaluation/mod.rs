@@ -127,7 +127,14 @@ impl Evaluator<'_> {
     }
 
     fn observer(&self, profile: &VisionProfile, eye: EyePosition) -> Result<Observer, EvaluationError> {
-        Ok(Observer::new(self.display, profile, eye, &self.topts, self.options.optics, self.cache)?)
+        Ok(Observer::new(
+            self.display,
+            profile,
+            eye,
+            &self.topts,
+            self.options.optics,
+            self.cache,
+        )?)
     }
 
     /// The given observers' scores (and a picture each).

@@ -15,11 +15,15 @@
 //! intensity is then filtered by the same bilinear tent the tracer splats with and sampled at retinal pixel
 //! centres, so the two models' kernels are compared like for like.
 
+use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;
 
 use crate::physics::display::{Aperture, DisplayGeometry};
-use crate::physics::transport::EyePosition;
+use crate::physics::observer::neighbour_blocks;
+use crate::physics::profile::{ProfileError, VisionProfile};
+use crate::physics::spectral::coupling;
+use crate::physics::transport::{EyePosition, RetinalGrid};
 use crate::physics::zernike::ZernikeCoefficients;
 
 /// Sampling of the Fourier-optics computation.
@@ -95,7 +99,10 @@ impl FourierView<'_> {
                         x * x + y * y <= half * half,
                         ((x - q[0]).powi(2) + (y - q[1]).powi(2)) / (lambda * d.gap_mm),
                     ),
-                    Aperture::Lenslet => (x.abs() <= half && y.abs() <= half, -2.0 * (x * q[0] + y * q[1]) / (lambda * d.gap_mm)),
+                    Aperture::Lenslet => (
+                        x.abs() <= half && y.abs() <= half,
+                        -2.0 * (x * q[0] + y * q[1]) / (lambda * d.gap_mm),
+                    ),
                 };
                 if inside {
                     let fresnel = (x * x + y * y) / (lambda * d.viewing_distance_mm);
@@ -126,7 +133,8 @@ impl FourierView<'_> {
                     // W in µm, λ in µm. A positive W (a myopic eye's c₂⁰) converges the light more: in this
                     // phase convention (a diverging wave is exp(+iπr²/(λz))) that is exp(−i2πW/λ).
                     let w_um = poly.value(ux, uy);
-                    h[r * s.n + c] = Complex64::from_polar(1.0, -2.0 * std::f64::consts::PI * w_um / (self.wavelength_nm * 1e-3));
+                    h[r * s.n + c] =
+                        Complex64::from_polar(1.0, -2.0 * std::f64::consts::PI * w_um / (self.wavelength_nm * 1e-3));
                 }
             }
         }
@@ -209,6 +217,97 @@ impl FourierView<'_> {
     }
 }
 
+/// What `profile` sees of light field `l` (band-interleaved, [`crate::physics::transport`]) from the design
+/// position, entirely by Fourier optics: every view's kernel through the aperture and its neighbouring blocks'
+/// (as many as [`neighbour_blocks`] finds), per band at its centroid wavelength with the eye's chromatic
+/// defocus, normalised as the transport operator is (a plain image seen at its own intensity), convolved
+/// with the light field and mixed by the person's spectral coupling. Returns `[r·3 + a]` LMS on the retinal
+/// grid with `retina_oversample` pixels per pitch.
+pub fn view_lms(
+    display: &DisplayGeometry,
+    profile: &VisionProfile,
+    l: &[f32],
+    sampling: FourierSampling,
+    retina_oversample: u32,
+) -> Result<Vec<f32>, ProfileError> {
+    profile.validate()?;
+    let k = retina_oversample.max(1);
+    let grid = RetinalGrid::for_display(display, k);
+    let n_bands = display.n_bands();
+    let c = coupling(&display.projectors, &profile.cone_fundamentals()).c;
+    let mut out = vec![0f32; grid.len() * 3];
+    for (n, projector) in display.projectors.iter().enumerate() {
+        let lambda = projector.centroid_nm();
+        let wavefront = profile.wavefront_at(lambda)?;
+        let nb = neighbour_blocks(
+            display,
+            lambda,
+            2.0 * wavefront.pupil_radius_mm(),
+            EyePosition::default(),
+        ) as i32;
+        let jobs: Vec<((u32, u32), (i32, i32))> = (0..display.views_v)
+            .flat_map(|j| (0..display.views_u).map(move |i| (i, j)))
+            .flat_map(|v| (-nb..=nb).flat_map(move |my| (-nb..=nb).map(move |mx| (v, (mx, my)))))
+            .collect();
+        let kernels: Vec<((u32, u32), FourierKernel)> = jobs
+            .par_iter()
+            .map(|&(view, block)| {
+                let fv = FourierView {
+                    display,
+                    wavefront: &wavefront,
+                    wavelength_nm: lambda,
+                    eye: EyePosition::default(),
+                    view,
+                    block,
+                    retina_oversample: k,
+                };
+                (view, fv.kernel(&sampling))
+            })
+            .collect();
+        let total: f64 = kernels.iter().map(|(_, kr)| kr.power).sum();
+        let scale = if total > 0.0 { (k * k) as f64 / total } else { 0.0 };
+        let band = convolve(display, &grid, &kernels, l, n_bands, n, scale);
+        for (r, v) in band.iter().enumerate() {
+            for a in 0..3 {
+                out[r * 3 + a] += (c[n][a] * v) as f32;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// S_n(r) = Σ_(b, v) L_n(b, v) · K_v(r − b·k) · scale, summed over every kernel of every view.
+fn convolve(
+    display: &DisplayGeometry,
+    grid: &RetinalGrid,
+    kernels: &[((u32, u32), FourierKernel)],
+    l: &[f32],
+    n_bands: usize,
+    band: usize,
+    scale: f64,
+) -> Vec<f64> {
+    let k = (grid.width / display.holes_x) as i64;
+    let (w, h) = (grid.width as i64, grid.height as i64);
+    let mut out = vec![0f64; grid.len()];
+    for (view, kernel) in kernels {
+        for by in 0..display.holes_y {
+            for bx in 0..display.holes_x {
+                let value = l[display.sample_index(bx, by, view.0, view.1) * n_bands + band] as f64 * scale;
+                if value == 0.0 {
+                    continue;
+                }
+                for &(dx, dy, wt) in &kernel.taps {
+                    let (gx, gy) = (bx as i64 * k + dx as i64, by as i64 * k + dy as i64);
+                    if gx >= 0 && gy >= 0 && gx < w && gy < h {
+                        out[(gy * w + gx) as usize] += value * wt;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Swaps quadrants so that the grid's centre sample moves to index 0 (and back: n is even).
 fn shift_centre(u: &mut [Complex64], n: usize) {
     let h = n / 2;
@@ -251,9 +350,12 @@ mod tests {
         ZernikeCoefficients::new(pupil_mm, c).unwrap()
     }
 
+    /// A kernel normalised to sum 1: ((dx, dy), weight).
+    type Shape = Vec<((i32, i32), f64)>;
+
     /// The traced kernel of view `view` of an interior sample: (power relative to `reference`'s, taps
     /// normalised to sum 1, keyed like [`FourierKernel::taps`]).
-    fn traced(t: &TransportMatrix, d: &DisplayGeometry, view: (u32, u32), k: i32) -> (f64, Vec<((i32, i32), f64)>) {
+    fn traced(t: &TransportMatrix, d: &DisplayGeometry, view: (u32, u32), k: i32) -> (f64, Shape) {
         let (bx, by) = (d.holes_x / 2, d.holes_y / 2);
         let p = d.sample_index(bx, by, view.0, view.1);
         let m = &t.adjoint;
@@ -281,7 +383,12 @@ mod tests {
         m.values().map(|v| v.abs()).sum()
     }
 
-    fn compare(d: &DisplayGeometry, pupil_mm: f64, sampling: FourierSampling, views: &[(u32, u32)]) -> Vec<(f64, f64, f64)> {
+    fn compare(
+        d: &DisplayGeometry,
+        pupil_mm: f64,
+        sampling: FourierSampling,
+        views: &[(u32, u32)],
+    ) -> Vec<(f64, f64, f64)> {
         let w = eye(pupil_mm);
         let k = 2;
         let opts = TransportOptions {
@@ -340,9 +447,14 @@ mod tests {
             source_points: 4,
         };
         for (v, (traced_power, fourier_power, shape)) in
-            [(4, 4), (1, 4)].iter().zip(compare(&d, 4.0, sampling, &[(4, 4), (1, 4)]))
+            [(4, 4), (1, 4)]
+                .iter()
+                .zip(compare(&d, 4.0, sampling, &[(4, 4), (1, 4)]))
         {
-            assert!((traced_power / fourier_power - 1.0).abs() < 0.08, "view {v:?}: power {traced_power} vs {fourier_power}");
+            assert!(
+                (traced_power / fourier_power - 1.0).abs() < 0.08,
+                "view {v:?}: power {traced_power} vs {fourier_power}"
+            );
             assert!(shape < 0.15, "view {v:?}: L1 {shape}");
         }
     }
@@ -364,9 +476,14 @@ mod tests {
             source_points: 3,
         };
         for (v, (traced_power, fourier_power, shape)) in
-            [(2, 2), (0, 2), (0, 0)].iter().zip(compare(&d, 6.0, sampling, &[(2, 2), (0, 2), (0, 0)]))
+            [(2, 2), (0, 2), (0, 0)]
+                .iter()
+                .zip(compare(&d, 6.0, sampling, &[(2, 2), (0, 2), (0, 0)]))
         {
-            assert!((traced_power / fourier_power - 1.0).abs() < 0.04, "view {v:?}: power {traced_power} vs {fourier_power}");
+            assert!(
+                (traced_power / fourier_power - 1.0).abs() < 0.04,
+                "view {v:?}: power {traced_power} vs {fourier_power}"
+            );
             assert!(shape < 0.25, "view {v:?}: L1 {shape}");
         }
     }

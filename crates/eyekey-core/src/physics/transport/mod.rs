@@ -361,8 +361,7 @@ mod tests {
             ..wave(550.0, 1)
         };
         for (d, opts) in [(tiny(), wave(550.0, 1)), (lenslet, wave(550.0, 1)), (tiny(), kernels)] {
-            let t = TransportMatrix::build(&d, &ZernikeCoefficients::zero(6.0), EyePosition::default(), &opts)
-                .unwrap();
+            let t = TransportMatrix::build(&d, &ZernikeCoefficients::zero(6.0), EyePosition::default(), &opts).unwrap();
             let seen = plain_view(&d, &t, 0.7);
             let mut interior = Vec::new();
             for y in 2..d.holes_y - 2 {

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 
 use super::rng::SplitMix64;
 use super::trace::{bilinear, finish, Tracer};
+use crate::physics::diffraction::{airy_intensity, sinc2};
 use crate::physics::display::Aperture;
 use crate::physics::transport::{CsrMatrix, EyePosition, TransportError, TransportMatrix, TransportStats};
 
@@ -35,12 +36,162 @@ struct ViewKernel {
     taps: Vec<Tap>,
     traced: u64,
     in_pupil: u64,
+    /// The light that entered the pupil, in sub-rays' worth (each weighted by its sampling weight).
+    power: f64,
+}
+
+/// How a kernel's sub-rays find the pupil.
+#[derive(Clone, Copy, PartialEq)]
+enum Sampling {
+    /// Draw the diffraction angle from the aperture's pattern; sub-rays that miss the pupil are lost (best when
+    /// the pattern is narrower than the pupil: lenslets).
+    Angle,
+    /// Draw the pupil point uniformly and weight the sub-ray by the pattern's density at the angle that
+    /// reaches it, times the pupil's solid angle: every sub-ray counts (best when the pattern is wider than
+    /// the pupil: pinholes). The same expectation as `Angle`, importance-sampled.
+    Pupil,
+}
+
+/// Points spread evenly over the unit pupil disc (a sunflower pattern: radius √((r + ½)/N), golden-angle
+/// steps), with the landing shift per point (retinal pixels) and per derivative term: the pupil-sampled
+/// kernels use point r for their r-th sub-ray of every view and block, so the wavefront's gradient is
+/// evaluated once per point, not once per sub-ray.
+struct PupilTable {
+    points: Vec<[f64; 2]>,
+    shift: Vec<[f64; 2]>,
+    /// `n_terms` per point.
+    term_shift: Vec<[f64; 2]>,
+    /// The largest |shift| component over the table, retinal pixels.
+    max_shift: f64,
+}
+
+impl PupilTable {
+    fn new(tracer: &Tracer<'_>, n: usize) -> Self {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let points: Vec<[f64; 2]> = (0..n)
+            .map(|r| {
+                let rho = ((r as f64 + 0.5) / n as f64).sqrt();
+                let (s, c) = (golden * r as f64).sin_cos();
+                [rho * c, rho * s]
+            })
+            .collect();
+        let k = tracer.shift_per_grad;
+        let shift: Vec<[f64; 2]> = points
+            .iter()
+            .map(|p| {
+                let g = tracer.poly.gradient(p[0], p[1]);
+                [k * g[0], k * g[1]]
+            })
+            .collect();
+        let term_shift = points
+            .iter()
+            .flat_map(|p| {
+                tracer.term_polys.iter().map(move |tp| {
+                    let g = tp.gradient(p[0], p[1]);
+                    [k * g[0], k * g[1]]
+                })
+            })
+            .collect();
+        let max_shift = shift.iter().fold(0f64, |m, s| m.max(s[0].abs()).max(s[1].abs()));
+        Self {
+            points,
+            shift,
+            term_shift,
+            max_shift,
+        }
+    }
+}
+
+/// A view's kernel accumulated on a dense box of retinal offsets, with a sorted overflow list for the rare
+/// landing outside it.
+struct KernelBox {
+    x0: i64,
+    y0: i64,
+    width: i64,
+    height: i64,
+    n_terms: usize,
+    w: Vec<f64>,
+    dw: Vec<f64>,
+    overflow: Vec<(i64, i64, f64, Vec<f64>)>,
+}
+
+impl KernelBox {
+    fn new(x: (i64, i64), y: (i64, i64), n_terms: usize) -> Self {
+        let (width, height) = (x.1 - x.0 + 1, y.1 - y.0 + 1);
+        let cells = (width * height) as usize;
+        Self {
+            x0: x.0,
+            y0: y.0,
+            width,
+            height,
+            n_terms,
+            w: vec![0.0; cells],
+            dw: vec![0.0; cells * n_terms],
+            overflow: Vec::new(),
+        }
+    }
+
+    /// Splats a landing at `f` (offset pixels) of weight `weight` with landing derivatives `df` (per term).
+    fn splat(&mut self, f: [f64; 2], weight: f64, df: &[[f64; 2]]) {
+        let (fx, fy) = (f[0].floor() as i64, f[1].floor() as i64);
+        for corner in 0..4u8 {
+            let (dx, dy) = (fx + (corner & 1) as i64, fy + (corner >> 1) as i64);
+            let (w, dwdf) = bilinear(f, corner);
+            let (cx, cy) = (dx - self.x0, dy - self.y0);
+            if cx >= 0 && cy >= 0 && cx < self.width && cy < self.height {
+                let cell = (cy * self.width + cx) as usize;
+                self.w[cell] += weight * w;
+                for (t, d) in df.iter().enumerate() {
+                    self.dw[cell * self.n_terms + t] += weight * (dwdf[0] * d[0] + dwdf[1] * d[1]);
+                }
+            } else {
+                let dw = df.iter().map(|d| weight * (dwdf[0] * d[0] + dwdf[1] * d[1])).collect();
+                self.overflow.push((dx, dy, weight * w, dw));
+            }
+        }
+    }
+
+    /// The non-zero taps, sorted by (dy, dx).
+    fn taps(self) -> Vec<Tap> {
+        let n_terms = self.n_terms;
+        let mut taps: Vec<Tap> = Vec::new();
+        for cy in 0..self.height {
+            for cx in 0..self.width {
+                let cell = (cy * self.width + cx) as usize;
+                let dw = &self.dw[cell * n_terms..(cell + 1) * n_terms];
+                if self.w[cell] != 0.0 || dw.iter().any(|v| *v != 0.0) {
+                    taps.push(Tap {
+                        dx: (cx + self.x0) as i32,
+                        dy: (cy + self.y0) as i32,
+                        w: self.w[cell] as f32,
+                        dw: dw.iter().map(|v| *v as f32).collect(),
+                    });
+                }
+            }
+        }
+        for (dx, dy, w, dw) in self.overflow {
+            match taps.iter_mut().find(|t| t.dx == dx as i32 && t.dy == dy as i32) {
+                Some(t) => {
+                    t.w += w as f32;
+                    t.dw.iter_mut().zip(&dw).for_each(|(a, b)| *a += *b as f32);
+                }
+                None => taps.push(Tap {
+                    dx: dx as i32,
+                    dy: dy as i32,
+                    w: w as f32,
+                    dw: dw.iter().map(|v| *v as f32).collect(),
+                }),
+            }
+        }
+        taps.sort_by_key(|t| (t.dy, t.dx));
+        taps
+    }
 }
 
 impl Tracer<'_> {
     /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block, each landing weighted `weight`
     /// (taps keyed relative to the block's first retinal pixel).
-    fn view_kernel(&self, i: u32, j: u32, rays: u32, weight: f64) -> ViewKernel {
+    fn view_kernel(&self, i: u32, j: u32, rays: u32, weight: f64, table: &PupilTable) -> ViewKernel {
         let d = self.display;
         let k = self.options.retina_oversample as f64;
         let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
@@ -56,14 +207,38 @@ impl Tracer<'_> {
         let nb = wave.neighbour_blocks as i64;
         let (kx, ky) = (centre(self.eye.x_mm), centre(self.eye.y_mm));
         let n_terms = self.term_polys.len();
-        let mut entries: Vec<(u64, f64, Vec<f64>)> = Vec::new();
-        let (mut traced, mut in_pupil) = (0u64, 0u64);
+        let lambda_mm = wave.wavelength_nm * 1e-6;
+        let sampling = match d.aperture {
+            Aperture::Pinhole if 1.22 * lambda_mm * self.d_eye / a > self.r_p => Sampling::Pupil,
+            _ => Sampling::Angle,
+        };
+        // The pattern's angular density: Airy π·a²/(4λ²)·[2J₁(x)/x]², x = π·a·θ/λ (it integrates to 1 over the
+        // plane of angles); sinc² per axis, (A/λ)²·sinc²(Aθ_x/λ)·sinc²(Aθ_y/λ).
+        let density = |t: [f64; 2]| match d.aperture {
+            Aperture::Pinhole => {
+                let x = std::f64::consts::PI * a * t[0].hypot(t[1]) / lambda_mm;
+                std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm) * airy_intensity(x)
+            }
+            Aperture::Lenslet => (a / lambda_mm).powi(2) * sinc2(a * t[0] / lambda_mm) * sinc2(a * t[1] / lambda_mm),
+        };
+        let pupil_solid_angle = std::f64::consts::PI * self.r_p * self.r_p / (self.d_eye * self.d_eye);
+        let (mut traced, mut in_pupil, mut power) = (0u64, 0u64, 0f64);
+        // The box holding every landing: the window's blocks, the aperture, and the largest aberration shift
+        // (with a margin for angle-sampled pupil points between the table's).
+        let reach = 1.25 * table.max_shift + 2.0;
+        let bounds = |kc: i64| {
+            let lo = (k - 1.0) / 2.0 + (-0.5 * a - (kc + nb) as f64 * pitch) / self.grid.pixel_mm - reach;
+            let hi = (k - 1.0) / 2.0 + (0.5 * a - (kc - nb) as f64 * pitch) / self.grid.pixel_mm + reach;
+            (lo.floor() as i64, hi.ceil() as i64 + 1)
+        };
+        let mut kernel = KernelBox::new(bounds(kx), bounds(ky), n_terms);
+        let mut dfs: Vec<[f64; 2]> = vec![[0.0; 2]; n_terms];
         let view = (j * d.views_u + i) as u64;
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
                 let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                for _ in 0..rays {
+                for ray in 0..rays as usize {
                     traced += 1;
                     let (ux, uy) = match d.aperture {
                         Aperture::Pinhole => {
@@ -76,10 +251,6 @@ impl Tracer<'_> {
                     let jx = (rng.next_f64() - 0.5) * p_s;
                     let jy = (rng.next_f64() - 0.5) * p_s;
                     let (u1, u2) = (rng.next_f64(), rng.next_f64());
-                    let theta = match d.aperture {
-                        Aperture::Pinhole => sampler.pinhole_angle(a, wave.wavelength_nm, u1, u2),
-                        Aperture::Lenslet => sampler.lenslet_angle(a, wave.wavelength_nm, u1, u2),
-                    };
                     // The aperture at the origin, the sample's block m blocks over: num = slope·g.
                     let s = match d.aperture {
                         Aperture::Pinhole => [ux, uy],
@@ -89,60 +260,68 @@ impl Tracer<'_> {
                         s[0] - mx as f64 * pitch * aim - off[0] - jx,
                         s[1] - my as f64 * pitch * aim - off[1] - jy,
                     ];
-                    let px = ux + self.d_eye * (num[0] / d.gap_mm + theta[0]) - self.eye.x_mm;
-                    let py = uy + self.d_eye * (num[1] / d.gap_mm + theta[1]) - self.eye.y_mm;
-                    let (rx, ry) = (px / self.r_p, py / self.r_p);
-                    if rx * rx + ry * ry > 1.0 {
+                    // Where the undiffracted ray meets the pupil plane, relative to the pupil's centre.
+                    let chief = [
+                        ux + self.d_eye * num[0] / d.gap_mm - self.eye.x_mm,
+                        uy + self.d_eye * num[1] / d.gap_mm - self.eye.y_mm,
+                    ];
+                    let (rx, ry, ray_weight, point) = match sampling {
+                        Sampling::Angle => {
+                            let theta = match d.aperture {
+                                Aperture::Pinhole => sampler.pinhole_angle(a, wave.wavelength_nm, u1, u2),
+                                Aperture::Lenslet => sampler.lenslet_angle(a, wave.wavelength_nm, u1, u2),
+                            };
+                            let (rx, ry) = (
+                                (chief[0] + self.d_eye * theta[0]) / self.r_p,
+                                (chief[1] + self.d_eye * theta[1]) / self.r_p,
+                            );
+                            if rx * rx + ry * ry > 1.0 {
+                                continue;
+                            }
+                            (rx, ry, 1.0, None)
+                        }
+                        Sampling::Pupil => {
+                            let p = ray % table.points.len();
+                            let [rx, ry] = table.points[p];
+                            let theta = [
+                                (rx * self.r_p - chief[0]) / self.d_eye,
+                                (ry * self.r_p - chief[1]) / self.d_eye,
+                            ];
+                            (rx, ry, density(theta) * pupil_solid_angle, Some(p))
+                        }
+                    };
+                    if ray_weight == 0.0 {
                         continue;
                     }
                     in_pupil += 1;
-                    let grad = self.poly.gradient(rx, ry);
-                    let f = [
-                        (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm + self.shift_per_grad * grad[0],
-                        (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm + self.shift_per_grad * grad[1],
-                    ];
-                    let dfs: Vec<[f64; 2]> = self
-                        .term_polys
-                        .iter()
-                        .map(|tp| {
-                            let g = tp.gradient(rx, ry);
+                    power += ray_weight;
+                    let shift = match point {
+                        Some(p) => {
+                            dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
+                            table.shift[p]
+                        }
+                        None => {
+                            for (df, tp) in dfs.iter_mut().zip(&self.term_polys) {
+                                let g = tp.gradient(rx, ry);
+                                *df = [self.shift_per_grad * g[0], self.shift_per_grad * g[1]];
+                            }
+                            let g = self.poly.gradient(rx, ry);
                             [self.shift_per_grad * g[0], self.shift_per_grad * g[1]]
-                        })
-                        .collect();
-                    let (x0, y0) = (f[0].floor() as i64, f[1].floor() as i64);
-                    for corner in 0..4u8 {
-                        let (dx, dy) = (x0 + (corner & 1) as i64, y0 + (corner >> 1) as i64);
-                        let (w, dwdf) = bilinear(f, corner);
-                        let key = ((dy + (1 << 30)) as u64) << 32 | (dx + (1 << 30)) as u64;
-                        let dw = dfs.iter().map(|df| weight * (dwdf[0] * df[0] + dwdf[1] * df[1])).collect();
-                        entries.push((key, weight * w, dw));
-                    }
+                        }
+                    };
+                    let f = [
+                        (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm + shift[0],
+                        (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm + shift[1],
+                    ];
+                    kernel.splat(f, weight * ray_weight, &dfs);
                 }
             }
         }
-        entries.sort_unstable_by_key(|e| e.0);
-        let mut taps: Vec<Tap> = Vec::new();
-        let mut last = u64::MAX;
-        for (key, w, dw) in entries {
-            if key != last {
-                taps.push(Tap {
-                    dx: (key & 0xFFFF_FFFF) as i64 as i32 - (1 << 30),
-                    dy: (key >> 32) as i64 as i32 - (1 << 30),
-                    w: 0.0,
-                    dw: vec![0.0; n_terms],
-                });
-                last = key;
-            }
-            let t = taps.last_mut().expect("a tap was pushed");
-            t.w += w as f32;
-            for (a, b) in t.dw.iter_mut().zip(dw) {
-                *a += b as f32;
-            }
-        }
         ViewKernel {
-            taps,
+            taps: kernel.taps(),
             traced,
             in_pupil,
+            power,
         }
     }
 
@@ -154,8 +333,9 @@ impl Tracer<'_> {
             .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
             .collect();
         let at_design = self.eye.x_mm == 0.0 && self.eye.y_mm == 0.0;
-        let design_count: u64 = if at_design {
-            0
+        let table = PupilTable::new(self, rays as usize);
+        let design_power: f64 = if at_design {
+            0.0
         } else {
             let design = Tracer {
                 eye: EyePosition::default(),
@@ -165,21 +345,21 @@ impl Tracer<'_> {
             };
             views
                 .par_iter()
-                .map(|&(i, j)| design.view_kernel(i, j, rays, 1.0).in_pupil)
+                .map(|&(i, j)| design.view_kernel(i, j, rays, 1.0, &table).power)
                 .sum()
         };
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
-        let weight_for = |count: u64| if count > 0 { k2 / count as f64 } else { 0.0 };
+        let weight_for = |power: f64| if power > 0.0 { k2 / power } else { 0.0 };
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&(i, j)| self.view_kernel(i, j, rays, 1.0))
+            .map(|&(i, j)| self.view_kernel(i, j, rays, 1.0, &table))
             .collect();
-        let count = if at_design {
-            kernels.iter().map(|k| k.in_pupil).sum()
+        let power = if at_design {
+            kernels.iter().map(|k| k.power).sum()
         } else {
-            design_count
+            design_power
         };
-        let w = weight_for(count) as f32;
+        let w = weight_for(power) as f32;
         for k in &mut kernels {
             for t in &mut k.taps {
                 t.w *= w;
@@ -255,6 +435,12 @@ impl TransportMatrix {
             indices,
             values,
         };
-        Ok(finish(grid, adjoint, t_dvalues, tracer.options.derivative_terms.clone(), stats))
+        Ok(finish(
+            grid,
+            adjoint,
+            t_dvalues,
+            tracer.options.derivative_terms.clone(),
+            stats,
+        ))
     }
 }

@@ -423,7 +423,13 @@ impl TransportMatrix {
         let holes: Vec<HoleOut> = (0..n_holes).into_par_iter().map(|h| tracer.hole(h)).collect();
         let n_terms = tracer.term_polys.len();
         let (adjoint, t_dvalues, stats) = assemble(&holes, display.n_samples_per_band(), grid.len(), n_terms)?;
-        Ok(finish(grid, adjoint, t_dvalues, options.derivative_terms.clone(), stats))
+        Ok(finish(
+            grid,
+            adjoint,
+            t_dvalues,
+            options.derivative_terms.clone(),
+            stats,
+        ))
     }
 }
 
