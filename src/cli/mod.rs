@@ -254,7 +254,7 @@ pub struct EvaluateArgs {
 pub enum ExampleCommand {
     /// A display description.
     Display {
-        /// Preset: paper, secure or small.
+        /// Preset: paper, secure, small, lenslet or pinhole.
         #[arg(long, default_value = "paper")]
         preset: String,
     },

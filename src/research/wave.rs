@@ -13,7 +13,7 @@ use anyhow::Result;
 
 use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
 use eyekey_core::evaluation::{Reference, DEFAULT_THRESHOLD};
-use eyekey_core::imaging::save_rgb_png;
+
 use eyekey_core::physics::display::{Aperture, DisplayGeometry};
 use eyekey_core::physics::fourier::{view_lms, FourierSampling};
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
@@ -30,6 +30,18 @@ struct Scored {
     wave: f64,
     /// The same view by the independent Fourier-optics model, when asked for.
     fourier: Option<f64>,
+}
+
+/// Saves a retinal picture enlarged to at least 192 pixels across (nearest neighbour), so it can be looked at.
+fn save_rgb_png(pic: &image::RgbImage, path: &Path) -> Result<()> {
+    let k = (192 / pic.width().max(1)).max(1);
+    let big = image::imageops::resize(
+        pic,
+        pic.width() * k,
+        pic.height() * k,
+        image::imageops::FilterType::Nearest,
+    );
+    Ok(eyekey_core::imaging::save_rgb_png(&big, path)?)
 }
 
 /// Scores `l` for `person` under both models (and, with `fourier`, the Fourier-optics one); saves the pictures

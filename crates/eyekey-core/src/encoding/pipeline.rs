@@ -14,10 +14,10 @@ use super::solver::{minimise, Objective, Progress, SolveResult, SolverOptions, T
 use crate::evaluation::attackers::{camera_lens, head_ring, one_band_observers};
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::display::DisplayGeometry;
-use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer};
+use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
-use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportOptions};
+use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportError, TransportOptions};
 
 /// The light field and what the solver did.
 pub struct Encoded {
@@ -171,7 +171,7 @@ impl Cast {
             ..base_transport(o)
         };
         let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, o.optics, cache)
-            .map_err(|e| PipelineError::invalid("target profile", e.to_string()))?;
+            .map_err(|e| observer_error("target profile", e))?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
@@ -233,7 +233,7 @@ impl Cast {
         let d = &spec.display;
         let o = &spec.options;
         let observer = Observer::new(d, person, EyePosition::default(), &base_transport(o), o.optics, cache)
-            .map_err(|e| PipelineError::invalid(field, e.to_string()))?;
+            .map_err(|e| observer_error(field, e))?;
         Ok(if o.ablation == Some(Ablation::Optical) {
             Observer::with_coupling(observer.transports.clone(), self.target.coupling_f64.clone(), d.l_max)
         } else {
@@ -282,6 +282,15 @@ impl Cast {
     }
 }
 
+/// An observer that cannot be built: the display's fault when its wave-optics operator is too large, the
+/// person's (`field`) otherwise.
+fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
+    match e {
+        ObserverError::Transport(TransportError::OverBudget { .. }) => PipelineError::invalid("display", e.to_string()),
+        e => PipelineError::invalid(field, e.to_string()),
+    }
+}
+
 /// The target at four eye positions on a ring of radius `head_radius_mm` (none when it is 0); each is asked
 /// for the document with a quarter of the central weight.
 fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
@@ -294,7 +303,7 @@ fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Obse
         .map(|eye| {
             let o = &spec.options;
             Observer::new(&spec.display, &spec.target, eye, &base_transport(o), o.optics, cache)
-                .map_err(|e| PipelineError::invalid("target profile", e.to_string()))
+                .map_err(|e| observer_error("target profile", e))
         })
         .collect()
 }

@@ -45,7 +45,7 @@ pub enum DisplayError {
         reason: String,
     },
     /// An unknown preset name.
-    #[error("unknown display preset {0:?} (known: paper, secure, small)")]
+    #[error("unknown display preset {0:?} (known: paper, secure, small, lenslet, pinhole)")]
     UnknownPreset(String),
 }
 

@@ -487,4 +487,52 @@ mod tests {
             assert!(shape < 0.25, "view {v:?}: L1 {shape}");
         }
     }
+
+    #[test]
+    fn a_perfect_3_mm_pupil_images_a_point_with_the_airy_width_1_03_lambda_over_d() {
+        // A 10 µm hole is a point for a 3 mm pupil at 500 mm (its diffraction pattern is flat across the
+        // pupil), so the retinal image is the eye's own PSF: FWHM 1.029·λ/D (Born & Wolf §8.5.2), on the display
+        // plane 1.029 · 550e-6 · 500 / 3 = 0.0943 mm, which a 3.9 µm grid resolves. The transport operator's
+        // retinal pixels (≥ 0.3 mm) cannot show it; this checks the Fourier model's imaging itself.
+        let d = DisplayGeometry {
+            hole_diameter_mm: 0.01,
+            ..DisplayGeometry::paper()
+        };
+        let w = ZernikeCoefficients::zero(3.0);
+        let v = FourierView {
+            display: &d,
+            wavefront: &w,
+            wavelength_nm: 550.0,
+            eye: EyePosition::default(),
+            view: (2, 2),
+            block: (0, 0),
+            retina_oversample: 1,
+        };
+        let s = FourierSampling {
+            n: 1024,
+            extent_mm: 4.0,
+            source_points: 1,
+        };
+        let (intensity, _) = v.intensity(&s);
+        let row = &intensity[s.n / 2 * s.n..(s.n / 2 + 1) * s.n];
+        let (peak_at, peak) = row
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |(i, m), (j, &x)| if x > m { (j, x) } else { (i, m) });
+        // Half-maximum crossings on either side, linearly interpolated.
+        let crossing = |step: i64| {
+            let mut j = peak_at as i64;
+            while row[(j + step) as usize] > peak / 2.0 {
+                j += step;
+            }
+            let (a, b) = (row[j as usize], row[(j + step) as usize]);
+            j as f64 + step as f64 * (a - peak / 2.0) / (a - b)
+        };
+        let fwhm = (crossing(1) - crossing(-1)) * s.extent_mm / s.n as f64;
+        let expected = 1.029 * 550e-6 * 500.0 / 3.0;
+        assert!(
+            (fwhm / expected - 1.0).abs() < 0.03,
+            "FWHM {fwhm} mm against {expected} mm"
+        );
+    }
 }

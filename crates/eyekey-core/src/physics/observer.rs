@@ -379,4 +379,31 @@ mod tests {
             assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{a} vs {b}");
         }
     }
+
+    #[test]
+    fn a_wave_operator_too_large_to_hold_is_refused_with_the_reason() {
+        // The `secure` preset's 33 µm holes spread every pixel's light through 7×7 apertures at 450 nm: one
+        // band's operator would need several GiB (81 views × 2304 holes × hundreds of taps), far over the
+        // bound; the `lenslet` preset's stays well under it.
+        let opts = TransportOptions {
+            sub_rays: 1,
+            ..Default::default()
+        };
+        let cache = TransportCache::disabled();
+        let p = VisionProfile::perfect();
+        let eye = EyePosition::default();
+        let err = Observer::new(&DisplayGeometry::secure(), &p, eye, &opts, Optics::Wave, &cache).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            matches!(err, ObserverError::Transport(TransportError::OverBudget { .. })),
+            "{text}"
+        );
+        assert!(text.contains("geometric") && text.contains("MiB"), "{text}");
+        let ok = Observer::new(&DisplayGeometry::lenslet(), &p, eye, &opts, Optics::Wave, &cache).unwrap();
+        let bytes: usize = ok.transports.iter().map(|t| t.memory_bytes()).sum();
+        assert!(
+            bytes < 4 * crate::physics::transport::MAX_WAVE_OPERATOR_BYTES / 2,
+            "{bytes}"
+        );
+    }
 }

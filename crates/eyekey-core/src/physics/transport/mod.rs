@@ -24,6 +24,10 @@ mod shift_invariant;
 mod trace;
 
 pub use cache::{TransportCache, DEFAULT_CAPACITY_BYTES};
+
+/// The most memory one band's wave-optics operator may take (T, Tᵀ and their derivative values): the
+/// resolving presets need 30–60 MiB; unresolved pinhole displays need gigabytes, which no job should claim.
+pub const MAX_WAVE_OPERATOR_BYTES: usize = 256 << 20;
 pub use csr::CsrMatrix;
 pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling};
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
@@ -47,6 +51,20 @@ pub enum TransportError {
     /// The operator would exceed the u32 index range.
     #[error("the transport operator has {0} entries, more than u32 indices allow")]
     TooLarge(usize),
+    /// A wave-optics operator would need more memory than one operator may take.
+    #[error(
+        "under wave optics one band's transport operator for this display would take {mib} MiB (at most {limit_mib} MiB): \
+         diffraction spreads every screen pixel's light through {apertures} apertures; displays whose views are \
+         resolved (`eyekey display check`: M >= 1) stay small, or use optics \"geometric\""
+    )]
+    OverBudget {
+        /// What the operator would take, MiB.
+        mib: usize,
+        /// The bound, MiB.
+        limit_mib: usize,
+        /// Apertures each sample's light passes through (the neighbour window).
+        apertures: usize,
+    },
 }
 
 /// One observer's light-transport operator T (Eqs. 10, 11, 13) and, optionally, ∂T/∂W_j.

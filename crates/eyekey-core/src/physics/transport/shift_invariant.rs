@@ -381,6 +381,17 @@ impl TransportMatrix {
         let n_terms = tracer.term_polys.len();
         let n_cols = d.n_samples_per_band();
         let (w, h) = (grid.width as i64, grid.height as i64);
+        // Refuse before allocating: every sample carries its view's taps (fewer at the border).
+        let bound: usize = kernels.iter().map(|k| k.taps.len()).sum::<usize>() * (d.holes_x * d.holes_y) as usize;
+        let bytes = bound * 8 * 2 * (1 + n_terms);
+        if bytes > super::MAX_WAVE_OPERATOR_BYTES {
+            let nb = tracer.options.wave.map_or(0, |w| w.neighbour_blocks) as usize;
+            return Err(TransportError::OverBudget {
+                mib: bytes >> 20,
+                limit_mib: super::MAX_WAVE_OPERATOR_BYTES >> 20,
+                apertures: (2 * nb + 1).pow(2),
+            });
+        }
         // Tᵀ row by row (one row per light-field sample, in frame order).
         let rows: Vec<(Vec<u32>, Vec<f32>, Vec<f32>)> = (0..n_cols)
             .into_par_iter()
