@@ -3,14 +3,15 @@
 #
 #   1. start `eyekey serve` on a temporary data directory and a free port;
 #   2. enrol the target's vision profile, and a representative observer the encoder keeps the document from;
-#   3. register a display (the `secure` preset: 48×48 holes, 9×9 views, 4 projectors);
+#   3. register a display (the `lenslet` preset: 48×48 lenslets of 1 mm, 9×9 views, 4 projectors, which
+#      resolves its views under diffraction; jobs are encoded under wave optics);
 #   4. upload the PIN slip and create a job; follow it until it succeeds;
 #   5. download the frame bundle with the display's own token, and let the display client install it;
 #   6. simulate what the target sees, and what a bystander sees: a third person the server has never heard of.
 #
 # Run from anywhere after `cargo build --release`:   examples/walkthrough.sh
 # Environment: EYEKEY (the binary, default ./target/release/eyekey), WORK (output directory, default a new
-# temporary one), PRESET (display preset, default secure).
+# temporary one), PRESET (display preset, default lenslet).
 # Needs curl, and jq or python3 to read JSON.
 
 set -euo pipefail
@@ -18,7 +19,7 @@ export LC_ALL=C
 cd "$(dirname "$0")/.."
 
 EYEKEY=${EYEKEY:-./target/release/eyekey}
-PRESET=${PRESET:-secure}
+PRESET=${PRESET:-lenslet}
 WORK=${WORK:-$(mktemp -d "${TMPDIR:-/tmp}/eyekey-walkthrough.XXXXXX")}
 DATA="$WORK/data"
 mkdir -p "$WORK"
