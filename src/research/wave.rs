@@ -33,7 +33,7 @@ struct Scored {
 }
 
 /// Saves a retinal picture enlarged to at least 192 pixels across (nearest neighbour), so it can be looked at.
-fn save_rgb_png(pic: &image::RgbImage, path: &Path) -> Result<()> {
+fn save_enlarged(pic: &image::RgbImage, path: &Path) -> Result<()> {
     let k = (192 / pic.width().max(1)).max(1);
     let big = image::imageops::resize(
         pic,
@@ -68,11 +68,11 @@ fn score(
     let grid = g.grid();
     let reference = Reference::new(document, grid.width, grid.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
     let (gs, gpic) = reference.score_observer(name, &g, l);
-    save_rgb_png(&gpic, &out.join(format!("{name}_geometric.png")))?;
+    save_enlarged(&gpic, &out.join(format!("{name}_geometric.png")))?;
     let w = Observer::new(display, person, eye, &topts, Optics::Wave, cache)?;
     let view = w.view(l);
     let ws = reference.score_lms(name, &view, w.white);
-    save_rgb_png(&w.picture(&view), &out.join(format!("{name}_wave.png")))?;
+    save_enlarged(&w.picture(&view), &out.join(format!("{name}_wave.png")))?;
     let fourier = if fourier {
         let sampling = FourierSampling {
             n: if display.aperture == Aperture::Lenslet {
@@ -84,7 +84,7 @@ fn score(
             source_points: 2,
         };
         let view = view_lms(display, person, l, sampling, 1)?;
-        save_rgb_png(&w.picture(&view), &out.join(format!("{name}_fourier.png")))?;
+        save_enlarged(&w.picture(&view), &out.join(format!("{name}_fourier.png")))?;
         Some(reference.score_lms(name, &view, w.white).legibility)
     } else {
         None

@@ -1,7 +1,7 @@
 use reqwest::StatusCode;
 use serde_json::json;
 
-use crate::helpers::{expect_error, expect_json, spawn_app, tiny_display};
+use crate::helpers::{expect_error, expect_json, spawn_app, tiny_display, TestApp};
 use eyekey_core::physics::display::DisplayGeometry;
 
 #[tokio::test]
@@ -81,13 +81,7 @@ async fn a_bad_registration_is_refused_naming_the_field() {
     let app = spawn_app().await;
     let mut g = tiny_display();
     g.viewing_distance_mm = 5.0;
-    let e = expect_error(
-        app.op_post("/v1/displays", &json!({ "name": "x", "geometry": g }))
-            .await,
-        StatusCode::UNPROCESSABLE_ENTITY,
-        "invalid",
-    )
-    .await;
+    let e = refused_geometry(&app, json!(g)).await;
     assert_eq!(e["field"], "geometry.viewing_distance_mm");
 
     let body = json!({ "name": "x", "preset": "small", "geometry": tiny_display() });
@@ -212,13 +206,15 @@ async fn lenslets_too_small_for_their_views_are_refused_naming_the_field() {
     let mut g = resolving_lenslet_display();
     // 5 views of 0.2 mm (1 mm) behind a 0.5 mm lenslet.
     g["hole_diameter_mm"] = json!(0.5);
-    let e = expect_error(
-        app.op_post("/v1/displays", &json!({ "name": "x", "geometry": g }))
-            .await,
-        StatusCode::UNPROCESSABLE_ENTITY,
-        "invalid",
-    )
-    .await;
+    let e = refused_geometry(&app, json!(g)).await;
     assert_eq!(e["field"], "geometry.views_u", "{e}");
     assert!(e["message"].as_str().unwrap().contains("lenslet"), "{e}");
+}
+
+/// Registers `geometry` and expects it refused as invalid; returns the error body.
+async fn refused_geometry(app: &TestApp, geometry: serde_json::Value) -> serde_json::Value {
+    let r = app
+        .op_post("/v1/displays", &json!({ "name": "x", "geometry": geometry }))
+        .await;
+    expect_error(r, StatusCode::UNPROCESSABLE_ENTITY, "invalid").await
 }

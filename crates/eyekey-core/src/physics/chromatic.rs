@@ -33,6 +33,19 @@ pub fn defocus_coefficient_um(m_d: f64, pupil_radius_mm: f64) -> f64 {
     -m_d * pupil_radius_mm * pupil_radius_mm / (4.0 * 3f64.sqrt())
 }
 
+/// `wavefront` (measured at `reference_nm`) as it is at `wavelength_nm`: its defocus term gains the eye's
+/// chromatic difference of refraction between the two.
+pub fn at_wavelength(
+    wavefront: &crate::physics::zernike::ZernikeCoefficients,
+    wavelength_nm: f64,
+    reference_nm: f64,
+) -> crate::physics::zernike::ZernikeCoefficients {
+    let mut z = wavefront.clone();
+    let m = chromatic_defocus_d(wavelength_nm, reference_nm);
+    z.coefficients_um[4] += defocus_coefficient_um(m, z.pupil_radius_mm());
+    z
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

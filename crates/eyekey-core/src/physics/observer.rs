@@ -207,13 +207,13 @@ impl Lens<'_> {
 
     /// The wavefront at `wavelength_nm`.
     fn at(&self, wavelength_nm: f64) -> ZernikeCoefficients {
-        use crate::physics::chromatic::{chromatic_defocus_d, defocus_coefficient_um};
-        let mut z = self.wavefront().clone();
-        if let Lens::Eye { reference_nm, .. } = self {
-            let m = chromatic_defocus_d(wavelength_nm, *reference_nm);
-            z.coefficients_um[4] += defocus_coefficient_um(m, z.pupil_radius_mm());
+        match self {
+            Lens::Eye {
+                wavefront,
+                reference_nm,
+            } => crate::physics::chromatic::at_wavelength(wavefront, wavelength_nm, *reference_nm),
+            Lens::Achromat(w) => (*w).clone(),
         }
-        z
     }
 }
 
@@ -281,16 +281,6 @@ pub enum Optics {
     /// neighbouring blocks, physical brightness.
     #[default]
     Wave,
-}
-
-impl Optics {
-    /// The name used in JSON and on the command line.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Optics::Geometric => "geometric",
-            Optics::Wave => "wave",
-        }
-    }
 }
 
 /// Sub-rays per view and neighbouring block of the shift-invariant kernels (docs/design.md §2.7), per sub-ray

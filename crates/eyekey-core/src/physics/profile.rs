@@ -167,11 +167,11 @@ impl VisionProfile {
     /// The wavefront at the viewing pupil for light of `wavelength_nm`: [`Self::effective_wavefront`] plus the
     /// eye's chromatic defocus relative to the reference wavelength (Thibos et al. 1992).
     pub fn wavefront_at(&self, wavelength_nm: f64) -> Result<ZernikeCoefficients, ProfileError> {
-        use crate::physics::chromatic::{chromatic_defocus_d, defocus_coefficient_um};
-        let mut z = self.effective_wavefront()?;
-        let m = chromatic_defocus_d(wavelength_nm, self.reference_wavelength());
-        z.coefficients_um[4] += defocus_coefficient_um(m, z.pupil_radius_mm());
-        Ok(z)
+        Ok(crate::physics::chromatic::at_wavelength(
+            &self.effective_wavefront()?,
+            wavelength_nm,
+            self.reference_wavelength(),
+        ))
     }
 
     /// The person's cone fundamentals.

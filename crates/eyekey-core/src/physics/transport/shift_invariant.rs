@@ -189,9 +189,10 @@ impl KernelBox {
 }
 
 impl Tracer<'_> {
-    /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block, each landing weighted `weight`
-    /// (taps keyed relative to the block's first retinal pixel).
-    fn view_kernel(&self, i: u32, j: u32, rays: u32, weight: f64, table: &PupilTable) -> ViewKernel {
+    /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block (taps keyed relative to the
+    /// block's first retinal pixel); with `power_only`, only the light entering the pupil is counted and no
+    /// taps are made.
+    fn view_kernel(&self, i: u32, j: u32, rays: u32, table: &PupilTable, power_only: bool) -> ViewKernel {
         let d = self.display;
         let k = self.options.retina_oversample as f64;
         let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
@@ -295,6 +296,9 @@ impl Tracer<'_> {
                     }
                     in_pupil += 1;
                     power += ray_weight;
+                    if power_only {
+                        continue;
+                    }
                     let shift = match point {
                         Some(p) => {
                             dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
@@ -313,7 +317,7 @@ impl Tracer<'_> {
                         (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm + shift[0],
                         (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm + shift[1],
                     ];
-                    kernel.splat(f, weight * ray_weight, &dfs);
+                    kernel.splat(f, ray_weight, &dfs);
                 }
             }
         }
@@ -345,14 +349,14 @@ impl Tracer<'_> {
             };
             views
                 .par_iter()
-                .map(|&(i, j)| design.view_kernel(i, j, rays, 1.0, &table).power)
+                .map(|&(i, j)| design.view_kernel(i, j, rays, &table, true).power)
                 .sum()
         };
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
         let weight_for = |power: f64| if power > 0.0 { k2 / power } else { 0.0 };
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&(i, j)| self.view_kernel(i, j, rays, 1.0, &table))
+            .map(|&(i, j)| self.view_kernel(i, j, rays, &table, false))
             .collect();
         let power = if at_design {
             kernels.iter().map(|k| k.power).sum()
