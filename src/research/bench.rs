@@ -119,12 +119,13 @@ fn time_kernels(display: &DisplayGeometry, sub_rays: u32) -> Result<(TransportMa
     let adjoint = time_best(20, || t.adjoint_lms(&y, &coupling, &mut x));
     // Compulsory traffic: the matrix (indptr, indices, values) once, the input vector once, the output once.
     let matrix_bytes = |m: &eyekey_core::physics::transport::CsrMatrix| (m.indptr.len() * 4 + m.nnz() * 8) as f64;
+    let (t_fwd, t_adj) = t.sparse().context("a traced (geometric) operator is held as CSR")?;
     let times = KernelTimes {
         build,
         forward,
         adjoint,
-        forward_bytes: matrix_bytes(&t.forward) + (l.len() * 4) as f64 + (y.len() * 4) as f64,
-        adjoint_bytes: matrix_bytes(&t.adjoint) + (y.len() * 4) as f64 + (x.len() * 4) as f64,
+        forward_bytes: matrix_bytes(t_fwd) + (l.len() * 4) as f64 + (y.len() * 4) as f64,
+        adjoint_bytes: matrix_bytes(t_adj) + (y.len() * 4) as f64 + (x.len() * 4) as f64,
     };
     Ok((t, times))
 }
@@ -289,7 +290,10 @@ impl BenchProblem {
         let mut b: Vec<f64> = Vec::new();
         let mut row0 = 0;
         for (o, obj) in self.observers.iter().zip(&self.objectives) {
-            let m = &o.transports[0].forward;
+            let m = o.transports[0]
+                .sparse()
+                .context("the exported problem is geometric (CSR)")?
+                .0;
             for r in 0..m.n_rows {
                 for e in m.indptr[r] as usize..m.indptr[r + 1] as usize {
                     let (c, v) = (m.indices[e] as usize, m.values[e] as f64);

@@ -140,7 +140,7 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
         seed: o.seed,
         retina_oversample: 1,
         derivative_terms: vec![],
-        wave: None,
+        ..Default::default()
     }
 }
 

@@ -358,13 +358,13 @@ mod tests {
     fn traced(t: &TransportMatrix, d: &DisplayGeometry, view: (u32, u32), k: i32) -> (f64, Shape) {
         let (bx, by) = (d.holes_x / 2, d.holes_y / 2);
         let p = d.sample_index(bx, by, view.0, view.1);
-        let m = &t.adjoint;
-        let (a, b) = (m.indptr[p] as usize, m.indptr[p + 1] as usize);
         let w = t.grid.width as i32;
-        let taps: Vec<((i32, i32), f64)> = (a..b)
-            .map(|e| {
-                let row = m.indices[e] as i32;
-                ((row % w - bx as i32 * k, row / w - by as i32 * k), m.values[e] as f64)
+        let taps: Vec<((i32, i32), f64)> = t
+            .column(d, p)
+            .into_iter()
+            .map(|(row, value)| {
+                let row = row as i32;
+                ((row % w - bx as i32 * k, row / w - by as i32 * k), value as f64)
             })
             .collect();
         let sum: f64 = taps.iter().map(|t| t.1).sum();

@@ -69,6 +69,9 @@ pub struct TransportOptions {
     pub derivative_terms: Vec<usize>,
     /// Wave-optics sampling for one wavelength; `None` is the geometric model (docs/design.md §2).
     pub wave: Option<WaveSampling>,
+    /// The most memory a wave-optics operator traced sample by sample (an eye off the design distance) may
+    /// take, bytes; a build that would exceed it stops with [`super::TransportError::OverBudget`].
+    pub max_traced_wave_bytes: usize,
 }
 
 /// How a wave-optics build samples one band (docs/design.md §2, "Wave optics").
@@ -99,6 +102,7 @@ impl Default for TransportOptions {
             retina_oversample: 1,
             derivative_terms: Vec::new(),
             wave: None,
+            max_traced_wave_bytes: super::MAX_WAVE_OPERATOR_BYTES,
         }
     }
 }

@@ -21,16 +21,20 @@ mod grid;
 mod kernels;
 mod rng;
 mod shift_invariant;
+mod stencil;
 mod trace;
 
 pub use cache::{TransportCache, DEFAULT_CAPACITY_BYTES};
 
-/// The most memory one band's wave-optics operator may take (T, Tᵀ and their derivative values): the
-/// resolving presets need 30–60 MiB; unresolved pinhole displays need gigabytes, which no job should claim.
+/// The most memory one band's traced wave-optics operator may take (T, Tᵀ and their derivative values), for
+/// an eye nearer or farther than the design distance (at the design distance the operator is per-view
+/// stencils of a few hundred KiB): the resolving presets need tens of MiB; unresolved pinhole displays need
+/// gigabytes, which no job should claim.
 pub const MAX_WAVE_OPERATOR_BYTES: usize = 256 << 20;
 pub use csr::CsrMatrix;
 pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling};
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
+pub use stencil::StencilOperator;
 
 use rayon::prelude::*;
 
@@ -68,22 +72,49 @@ pub enum TransportError {
 }
 
 /// One observer's light-transport operator T (Eqs. 10, 11, 13) and, optionally, ∂T/∂W_j.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct TransportMatrix {
     /// The retinal grid (rows of T).
     pub grid: RetinalGrid,
-    /// T: retinal pixels × light-field samples.
-    pub forward: CsrMatrix,
-    /// Tᵀ: light-field samples × retinal pixels.
-    pub adjoint: CsrMatrix,
     /// OSA indices of the stored derivatives.
     pub derivative_terms: Vec<usize>,
+    /// Statistics of the build.
+    pub stats: TransportStats,
+    repr: Repr,
+}
+
+impl std::fmt::Debug for TransportMatrix {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TransportMatrix")
+            .field("grid", &self.grid)
+            .field("derivative_terms", &self.derivative_terms)
+            .field("stats", &self.stats)
+            .field("stencil", &self.is_stencil())
+            .field("nnz", &self.nnz())
+            .field("bytes", &self.memory_bytes())
+            .finish()
+    }
+}
+
+/// How T is held.
+#[derive(Clone)]
+enum Repr {
+    /// A traced T: CSR and its transpose, with ∂T/∂W_j on each pattern.
+    Sparse(Sparse),
+    /// The shift-invariant wave operator at the design distance: one kernel per view.
+    Stencil(StencilOperator),
+}
+
+#[derive(Clone)]
+struct Sparse {
+    /// T: retinal pixels × light-field samples.
+    forward: CsrMatrix,
+    /// Tᵀ: light-field samples × retinal pixels.
+    adjoint: CsrMatrix,
     /// ∂T/∂W_j values on the pattern of `forward`, one vector per term.
     derivative_forward: Vec<Vec<f32>>,
     /// The same values on the pattern of `adjoint`.
     derivative_adjoint: Vec<Vec<f32>>,
-    /// Statistics of the build.
-    pub stats: TransportStats,
 }
 
 /// What a transport build traced.
@@ -101,50 +132,90 @@ pub struct TransportStats {
 impl TransportMatrix {
     /// Light-field samples per band (columns of T).
     pub fn n_samples(&self) -> usize {
-        self.forward.n_cols
+        match &self.repr {
+            Repr::Sparse(m) => m.forward.n_cols,
+            Repr::Stencil(st) => st.n_samples(),
+        }
     }
 
     /// Retinal pixels (rows of T).
     pub fn n_pixels(&self) -> usize {
-        self.forward.n_rows
+        self.grid.len()
     }
 
-    /// Stored entries of T.
+    /// Non-zero entries of T (for a stencil operator: the multiply-adds of one product).
     pub fn nnz(&self) -> usize {
-        self.forward.nnz()
+        match &self.repr {
+            Repr::Sparse(m) => m.forward.nnz(),
+            Repr::Stencil(st) => st.nnz(),
+        }
     }
 
     /// Bytes held by the operator.
     pub fn memory_bytes(&self) -> usize {
-        let m = |c: &CsrMatrix| c.indptr.len() * 4 + c.indices.len() * 4 + c.values.len() * 4;
-        m(&self.forward)
-            + m(&self.adjoint)
-            + 4 * self
-                .derivative_forward
-                .iter()
-                .chain(&self.derivative_adjoint)
-                .map(Vec::len)
-                .sum::<usize>()
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let csr = |c: &CsrMatrix| c.indptr.len() * 4 + c.indices.len() * 4 + c.values.len() * 4;
+                csr(&m.forward)
+                    + csr(&m.adjoint)
+                    + 4 * m
+                        .derivative_forward
+                        .iter()
+                        .chain(&m.derivative_adjoint)
+                        .map(Vec::len)
+                        .sum::<usize>()
+            }
+            Repr::Stencil(st) => st.memory_bytes(),
+        }
+    }
+
+    /// T and Tᵀ as CSR, for an operator that is held that way (a traced T; not the stencils of the
+    /// shift-invariant wave operator).
+    pub fn sparse(&self) -> Option<(&CsrMatrix, &CsrMatrix)> {
+        match &self.repr {
+            Repr::Sparse(m) => Some((&m.forward, &m.adjoint)),
+            Repr::Stencil(_) => None,
+        }
+    }
+
+    /// True when T is held as per-view stencils.
+    pub fn is_stencil(&self) -> bool {
+        matches!(self.repr, Repr::Stencil(_))
+    }
+
+    /// Light-field sample `p`'s retinal pixels and weights: T's column p.
+    pub fn column(&self, display: &DisplayGeometry, p: usize) -> Vec<(u32, f32)> {
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let (a, b) = (m.adjoint.indptr[p] as usize, m.adjoint.indptr[p + 1] as usize);
+                m.adjoint.indices[a..b]
+                    .iter()
+                    .copied()
+                    .zip(m.adjoint.values[a..b].iter().copied())
+                    .collect()
+            }
+            Repr::Stencil(st) => st.column(display, p),
+        }
     }
 
     /// S = (C ⊗ T)·L (Eq. 13): `l[p·N + n]` → `out[r·3 + a]`. `coupling[n][a]` = c_na.
     pub fn forward_lms(&self, l: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
-        self.forward_with(&self.forward.values, l, coupling, out);
+        self.forward_with(None, l, coupling, out);
     }
 
     /// Lᵀ-side adjoint: `y[r·3 + a]` → `out[p·N + n]` = Σ_a c_na (Tᵀ y_a)_p.
     pub fn adjoint_lms(&self, y: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
-        self.adjoint_with(&self.adjoint.values, y, coupling, out);
+        self.adjoint_with(None, y, coupling, out);
     }
 
     /// (C ⊗ ∂T/∂W_j)·L for the k-th stored derivative term.
     pub fn derivative_forward_lms(&self, k: usize, l: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
-        self.forward_with(&self.derivative_forward[k], l, coupling, out);
+        self.forward_with(Some(k), l, coupling, out);
     }
 
     /// Adjoint of [`Self::derivative_forward_lms`].
     pub fn derivative_adjoint_lms(&self, k: usize, y: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
-        self.adjoint_with(&self.derivative_adjoint[k], y, coupling, out);
+        self.adjoint_with(Some(k), y, coupling, out);
     }
 
     /// One band n of S = Σ_n c_n ⊗ T_n L_n, for an operator that is band n's own (wave optics): `out[r·3 + a]`
@@ -163,9 +234,14 @@ impl TransportMatrix {
     ) {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
-        let values = term.map_or(&self.forward.values, |k| &self.derivative_forward[k]);
-        let m = &self.forward;
-        spmv_band_forward(&m.indptr, &m.indices, values, l, n_bands, band, c, accumulate, out);
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let values = term.map_or(&m.forward.values, |k| &m.derivative_forward[k]);
+                let f = &m.forward;
+                spmv_band_forward(&f.indptr, &f.indices, values, l, n_bands, band, c, accumulate, out);
+            }
+            Repr::Stencil(st) => st.forward_band(term, l, n_bands, band, c, accumulate, out),
+        }
     }
 
     /// The adjoint of [`Self::forward_band_lms`]: `out[p·N + band]` = Σ_a c[a] (Tᵀ y_a)_p; other bands'
@@ -181,25 +257,50 @@ impl TransportMatrix {
     ) {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
-        let values = term.map_or(&self.adjoint.values, |k| &self.derivative_adjoint[k]);
-        let m = &self.adjoint;
-        spmv_band_adjoint(&m.indptr, &m.indices, values, y, c, n_bands, band, out);
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let values = term.map_or(&m.adjoint.values, |k| &m.derivative_adjoint[k]);
+                let a = &m.adjoint;
+                spmv_band_adjoint(&a.indptr, &a.indices, values, y, c, n_bands, band, out);
+            }
+            Repr::Stencil(st) => st.adjoint_band(term, y, n_bands, band, c, out),
+        }
     }
 
-    fn forward_with(&self, values: &[f32], l: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
+    fn forward_with(&self, term: Option<usize>, l: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
         let n = coupling.len();
         assert_eq!(l.len(), self.n_samples() * n, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
-        let m = &self.forward;
-        spmv_fused(&m.indptr, &m.indices, values, l, n, coupling, false, out, 3);
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let values = term.map_or(&m.forward.values, |k| &m.derivative_forward[k]);
+                let f = &m.forward;
+                spmv_fused(&f.indptr, &f.indices, values, l, n, coupling, false, out, 3);
+            }
+            Repr::Stencil(st) => {
+                for (band, c) in coupling.iter().enumerate() {
+                    st.forward_band(term, l, n, band, *c, band > 0, out);
+                }
+            }
+        }
     }
 
-    fn adjoint_with(&self, values: &[f32], y: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
+    fn adjoint_with(&self, term: Option<usize>, y: &[f32], coupling: &[[f32; 3]], out: &mut [f32]) {
         let n = coupling.len();
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n, "light field length");
-        let m = &self.adjoint;
-        spmv_fused(&m.indptr, &m.indices, values, y, 3, coupling, true, out, n);
+        match &self.repr {
+            Repr::Sparse(m) => {
+                let values = term.map_or(&m.adjoint.values, |k| &m.derivative_adjoint[k]);
+                let a = &m.adjoint;
+                spmv_fused(&a.indptr, &a.indices, values, y, 3, coupling, true, out, n);
+            }
+            Repr::Stencil(st) => {
+                for (band, c) in coupling.iter().enumerate() {
+                    st.adjoint_band(term, y, n, band, *c, out);
+                }
+            }
+        }
     }
 }
 

@@ -11,16 +11,17 @@
 //! the diffraction angle: nothing depends on where b is. Its retinal landing relative to b's centre,
 //! (u − m·p_h) + d·∇W(P) (Eq. 9), does not either. So one kernel per view, traced once with many sub-rays, is
 //! every sample's column of T: the operator carries no per-sample jitter noise, and it is built in a fraction
-//! of the time a per-sample trace takes. The kernels are expanded into the same CSR layout as a traced T, so
-//! the fused products, the adjoint and ∂T/∂W_j are unchanged.
+//! of the time a per-sample trace takes. T is held as the kernels themselves and applied as stencils
+//! ([`super::stencil`]): a few hundred KiB where the expanded sparse form takes hundreds of MiB.
 
 use rayon::prelude::*;
 
 use super::rng::SplitMix64;
-use super::trace::{bilinear, finish, Tracer};
+use super::stencil::{StencilOperator, ViewStencil};
+use super::trace::{bilinear, Tracer};
 use crate::physics::diffraction::{airy_intensity, sinc2};
 use crate::physics::display::Aperture;
-use crate::physics::transport::{CsrMatrix, EyePosition, TransportError, TransportMatrix, TransportStats};
+use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
 
 /// One tap of a view's kernel: the offset (retinal pixels) from the sample's block origin, its weight and
 /// its ∂/∂W_j per derivative term.
@@ -376,86 +377,34 @@ impl Tracer<'_> {
 
 impl TransportMatrix {
     /// Builds a wave-optics T at the design distance from per-view kernels traced with `rays` sub-rays per
-    /// view and neighbouring block (see the module's documentation); `tracer` carries the geometry.
-    pub(super) fn build_shift_invariant(tracer: &Tracer<'_>, rays: u32) -> Result<Self, TransportError> {
+    /// view and neighbouring block (see the module's documentation), held as per-view stencils; `tracer`
+    /// carries the geometry.
+    pub(super) fn build_shift_invariant(tracer: &Tracer<'_>, rays: u32) -> Self {
         let d = tracer.display;
         let kernels = tracer.view_kernels(rays);
-        let grid = tracer.grid;
-        let k = tracer.options.retina_oversample as i64;
         let n_terms = tracer.term_polys.len();
-        let n_cols = d.n_samples_per_band();
-        let (w, h) = (grid.width as i64, grid.height as i64);
-        // Refuse before allocating: every sample carries its view's taps (fewer at the border).
-        let bound: usize = kernels.iter().map(|k| k.taps.len()).sum::<usize>() * (d.holes_x * d.holes_y) as usize;
-        let bytes = bound * 8 * 2 * (1 + n_terms);
-        if bytes > super::MAX_WAVE_OPERATOR_BYTES {
-            let nb = tracer.options.wave.map_or(0, |w| w.neighbour_blocks) as usize;
-            return Err(TransportError::OverBudget {
-                mib: bytes >> 20,
-                limit_mib: super::MAX_WAVE_OPERATOR_BYTES >> 20,
-                apertures: (2 * nb + 1).pow(2),
-            });
-        }
-        // Tᵀ row by row (one row per light-field sample, in frame order).
-        let rows: Vec<(Vec<u32>, Vec<f32>, Vec<f32>)> = (0..n_cols)
-            .into_par_iter()
-            .map(|p| {
-                let (x, y, i, j) = d.sample_coords(p);
-                let kernel = &kernels[(j * d.views_u + i) as usize];
-                let (ox, oy) = (x as i64 * k, y as i64 * k);
-                let mut cols = Vec::with_capacity(kernel.taps.len());
-                let mut vals = Vec::with_capacity(kernel.taps.len());
-                let mut dvals = Vec::with_capacity(kernel.taps.len() * n_terms);
-                for t in &kernel.taps {
-                    let (gx, gy) = (ox + t.dx as i64, oy + t.dy as i64);
-                    if gx < 0 || gy < 0 || gx >= w || gy >= h {
-                        continue;
-                    }
-                    cols.push((gy * w + gx) as u32);
-                    vals.push(t.w);
-                    dvals.extend_from_slice(&t.dw);
-                }
-                (cols, vals, dvals)
-            })
-            .collect();
-        let nnz: usize = rows.iter().map(|r| r.0.len()).sum();
-        if nnz >= u32::MAX as usize {
-            return Err(TransportError::TooLarge(nnz));
-        }
-        let mut indptr = Vec::with_capacity(n_cols + 1);
-        let mut indices = Vec::with_capacity(nnz);
-        let mut values = Vec::with_capacity(nnz);
-        let mut t_dvalues: Vec<Vec<f32>> = vec![Vec::with_capacity(nnz); n_terms];
-        indptr.push(0u32);
-        for (cols, vals, dvals) in rows {
-            indices.extend_from_slice(&cols);
-            values.extend_from_slice(&vals);
-            for (e, _) in cols.iter().enumerate() {
-                for (t, dv) in t_dvalues.iter_mut().enumerate() {
-                    dv.push(dvals[e * n_terms + t]);
-                }
-            }
-            indptr.push(indices.len() as u32);
-        }
         let stats = TransportStats {
             sub_rays_traced: kernels.iter().map(|k| k.traced).sum(),
             sub_rays_in_pupil: kernels.iter().map(|k| k.in_pupil).sum(),
             holes_seen: u64::from(d.holes_x * d.holes_y) * u64::from(kernels.iter().any(|k| k.in_pupil > 0)),
             sub_rays_off_grid: 0,
         };
-        let adjoint = CsrMatrix {
-            n_rows: n_cols,
-            n_cols: grid.len(),
-            indptr,
-            indices,
-            values,
-        };
-        Ok(finish(
-            grid,
-            adjoint,
-            t_dvalues,
-            tracer.options.derivative_terms.clone(),
+        let views = kernels
+            .iter()
+            .map(|kernel| {
+                let taps: Vec<(i64, i64, f32, &[f32])> = kernel
+                    .taps
+                    .iter()
+                    .map(|t| (t.dx as i64, t.dy as i64, t.w, t.dw.as_slice()))
+                    .collect();
+                ViewStencil::from_taps(&taps, n_terms)
+            })
+            .collect();
+        TransportMatrix {
+            grid: tracer.grid,
+            derivative_terms: tracer.options.derivative_terms.clone(),
             stats,
-        ))
+            repr: super::Repr::Stencil(StencilOperator::new(d, tracer.options.retina_oversample, views)),
+        }
     }
 }

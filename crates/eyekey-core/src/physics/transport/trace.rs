@@ -9,6 +9,9 @@ use crate::physics::transport::{
 use crate::physics::zernike::{ZernikeCoefficients, ZernikePolynomial};
 use rayon::prelude::*;
 
+/// Holes traced per parallel pass of a per-sample build (a wave-optics build checks its memory after each).
+const HOLES_PER_PASS: usize = 512;
+
 /// One sub-ray's landing point before splatting.
 pub(crate) struct Landing {
     col: u32,
@@ -412,16 +415,35 @@ impl TransportMatrix {
             wave_weight: 0.0,
         };
         if let Some(w) = options.wave.filter(|w| w.kernel_rays > 0 && eye.dz_mm == 0.0) {
-            return Self::build_shift_invariant(&tracer, w.kernel_rays);
+            return Ok(Self::build_shift_invariant(&tracer, w.kernel_rays));
         }
         let tracer = Tracer {
             wave_weight: tracer.physical_weight(),
             ..tracer
         };
-        // Trace and splat hole by hole in parallel; each hole's entries are merged per column.
+        // Trace and splat hole by hole in parallel; each hole's entries are merged per column. A wave-optics
+        // build counts what it holds as it goes and stops at the budget, before T and Tᵀ are assembled.
         let n_holes = (display.holes_x * display.holes_y) as usize;
-        let holes: Vec<HoleOut> = (0..n_holes).into_par_iter().map(|h| tracer.hole(h)).collect();
         let n_terms = tracer.term_polys.len();
+        let mut holes: Vec<HoleOut> = Vec::with_capacity(n_holes);
+        let mut bytes = 0usize;
+        for start in (0..n_holes).step_by(HOLES_PER_PASS) {
+            let end = (start + HOLES_PER_PASS).min(n_holes);
+            let pass: Vec<HoleOut> = (start..end).into_par_iter().map(|h| tracer.hole(h)).collect();
+            bytes += pass.iter().map(|h| h.cols.len()).sum::<usize>() * 8 * 2 * (1 + n_terms);
+            if let Some(w) = options.wave {
+                // The pass's share of the whole, extrapolated: refuse as soon as the total would exceed it.
+                let projected = bytes / end * n_holes;
+                if projected > options.max_traced_wave_bytes {
+                    return Err(TransportError::OverBudget {
+                        mib: projected >> 20,
+                        limit_mib: options.max_traced_wave_bytes >> 20,
+                        apertures: (2 * w.neighbour_blocks as usize + 1).pow(2),
+                    });
+                }
+            }
+            holes.extend(pass);
+        }
         let (adjoint, t_dvalues, stats) = assemble(&holes, display.n_samples_per_band(), grid.len(), n_terms)?;
         Ok(finish(
             grid,
@@ -448,11 +470,13 @@ pub(super) fn finish(
         .collect();
     TransportMatrix {
         grid,
-        forward,
-        adjoint,
         derivative_terms,
-        derivative_forward,
-        derivative_adjoint: t_dvalues,
         stats,
+        repr: super::Repr::Sparse(super::Sparse {
+            forward,
+            adjoint,
+            derivative_forward,
+            derivative_adjoint: t_dvalues,
+        }),
     }
 }

@@ -1,0 +1,499 @@
+//! The shift-invariant wave operator applied as per-view stencils (docs/design.md §2.7): T_n L = Σ_v K_v ⊛ L_v.
+//!
+//! Sample (hole x, y; view v) sends its light to the retinal pixels (x·k + dx, y·k + dy) with weight
+//! K_v(dx, dy), the same kernel for every hole of the view (k = retinal pixels per hole pitch). So T is held as
+//! one dense box of weights per view (and one per derivative term ∂T/∂W_j), a few hundred KiB where the
+//! expanded sparse form takes hundreds of MiB, and both products are sums of contiguous row operations:
+//!
+//! - forward, output row g_y: for every view v, kernel row c_y with (g_y − y0 − c_y) = y·k, and tap c_x,
+//!   the output pixels of phase φ = (x0 + c_x) mod k receive K_v(c_x, c_y)·L_v(·, y) shifted by
+//!   s = ⌊(x0 + c_x)/k⌋ holes: an AXPY over a whole row of holes;
+//! - adjoint, sample row (v, y): the same pairs read the phase-φ pixels of the row g_y = y·k + y0 + c_y of the
+//!   coupled image ỹ = Σ_a c_a y_a, shifted by s: an AXPY again.
+//!
+//! Taps that would land off the retinal grid are dropped, as in a traced T.
+
+use rayon::prelude::*;
+
+use crate::physics::display::DisplayGeometry;
+
+/// One view's kernel: a dense box of weights (and of ∂/∂W_j per term) over retinal offsets
+/// dx ∈ [x0, x0 + width), dy ∈ [y0, y0 + height) from a sample's hole origin (x·k, y·k).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct ViewStencil {
+    pub(crate) x0: i64,
+    pub(crate) y0: i64,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    /// `height × width`, row-major.
+    pub(crate) weights: Vec<f32>,
+    /// One `height × width` box per derivative term.
+    pub(crate) derivatives: Vec<Vec<f32>>,
+}
+
+impl ViewStencil {
+    /// A box from (dx, dy, weight, ∂weight per term) taps; an empty list gives an empty box.
+    pub(crate) fn from_taps(taps: &[(i64, i64, f32, &[f32])], n_terms: usize) -> Self {
+        if taps.is_empty() {
+            return Self {
+                x0: 0,
+                y0: 0,
+                width: 0,
+                height: 0,
+                weights: Vec::new(),
+                derivatives: vec![Vec::new(); n_terms],
+            };
+        }
+        let (x0, x1) = taps
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(lo, hi), t| (lo.min(t.0), hi.max(t.0)));
+        let (y0, y1) = taps
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(lo, hi), t| (lo.min(t.1), hi.max(t.1)));
+        let (width, height) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
+        let mut weights = vec![0f32; width * height];
+        let mut derivatives = vec![vec![0f32; width * height]; n_terms];
+        for &(dx, dy, w, dw) in taps {
+            let cell = (dy - y0) as usize * width + (dx - x0) as usize;
+            weights[cell] += w;
+            for (d, v) in derivatives.iter_mut().zip(dw) {
+                d[cell] += v;
+            }
+        }
+        Self {
+            x0,
+            y0,
+            width,
+            height,
+            weights,
+            derivatives,
+        }
+    }
+
+    fn values(&self, term: Option<usize>) -> &[f32] {
+        term.map_or(&self.weights, |t| &self.derivatives[t])
+    }
+}
+
+/// T (and ∂T/∂W_j) of one band as per-view stencils over a display's holes.
+#[derive(Clone, PartialEq)]
+pub struct StencilOperator {
+    holes_x: usize,
+    holes_y: usize,
+    views_u: usize,
+    views_v: usize,
+    /// Retinal pixels per hole pitch.
+    k: usize,
+    /// Per view, index j·U + i.
+    views: Vec<ViewStencil>,
+}
+
+impl std::fmt::Debug for StencilOperator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let largest = self
+            .views
+            .iter()
+            .map(|v| (v.width, v.height))
+            .max_by_key(|(w, h)| w * h);
+        f.debug_struct("StencilOperator")
+            .field("holes", &(self.holes_x, self.holes_y))
+            .field("views", &(self.views_u, self.views_v))
+            .field("k", &self.k)
+            .field("largest_kernel", &largest)
+            .field("bytes", &self.memory_bytes())
+            .finish()
+    }
+}
+
+/// Per tap column c_x of a box whose first column is x0: the output phase and the shift in holes.
+fn phases(x0: i64, width: usize, k: usize) -> Vec<(usize, i64)> {
+    let k = k as i64;
+    (0..width as i64)
+        .map(|cx| {
+            let t = x0 + cx;
+            (t.rem_euclid(k) as usize, t.div_euclid(k))
+        })
+        .collect()
+}
+
+/// The index range of x ∈ [0, n) with x + s ∈ [0, n).
+fn overlap(n: usize, s: i64) -> std::ops::Range<usize> {
+    let lo = (-s).max(0) as usize;
+    let hi = (n as i64 - s).clamp(0, n as i64) as usize;
+    lo.min(hi)..hi
+}
+
+/// dst[x] += a · src[x] over equal-length slices (the inner loop of both products).
+#[inline(always)]
+fn axpy(dst: &mut [f32], a: f32, src: &[f32]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d += a * s;
+    }
+}
+
+impl StencilOperator {
+    pub(crate) fn new(display: &DisplayGeometry, k: u32, views: Vec<ViewStencil>) -> Self {
+        assert_eq!(
+            views.len(),
+            (display.views_u * display.views_v) as usize,
+            "one stencil per view"
+        );
+        Self {
+            holes_x: display.holes_x as usize,
+            holes_y: display.holes_y as usize,
+            views_u: display.views_u as usize,
+            views_v: display.views_v as usize,
+            k: k.max(1) as usize,
+            views,
+        }
+    }
+
+    /// Light-field samples per band.
+    pub fn n_samples(&self) -> usize {
+        self.holes_x * self.holes_y * self.views_u * self.views_v
+    }
+
+    /// Retinal pixels.
+    pub fn n_pixels(&self) -> usize {
+        self.holes_x * self.holes_y * self.k * self.k
+    }
+
+    fn n_views(&self) -> usize {
+        self.views_u * self.views_v
+    }
+
+    /// Bytes held by the kernels.
+    pub fn memory_bytes(&self) -> usize {
+        self.views
+            .iter()
+            .map(|v| 4 * v.weights.len() * (1 + v.derivatives.len()))
+            .sum()
+    }
+
+    /// The multiply-adds of one band's product: every stored tap once per sample whose landing it keeps.
+    pub fn nnz(&self) -> usize {
+        let (w, h) = ((self.holes_x * self.k) as i64, (self.holes_y * self.k) as i64);
+        let k = self.k as i64;
+        // Holes x ∈ [0, n) with x·k + d ∈ [0, extent).
+        let count =
+            |n: usize, d: i64, extent: i64| (0..n as i64).filter(|x| (0..extent).contains(&(x * k + d))).count();
+        self.views
+            .iter()
+            .map(|v| {
+                let mut total = 0;
+                for cy in 0..v.height {
+                    let ny = count(self.holes_y, v.y0 + cy as i64, h);
+                    for cx in 0..v.width {
+                        if v.weights[cy * v.width + cx] != 0.0 {
+                            total += ny * count(self.holes_x, v.x0 + cx as i64, w);
+                        }
+                    }
+                }
+                total
+            })
+            .sum()
+    }
+
+    /// Sample `p`'s retinal pixels and weights (T's column p), off-grid taps dropped.
+    pub fn column(&self, display: &DisplayGeometry, p: usize) -> Vec<(u32, f32)> {
+        let (x, y, i, j) = display.sample_coords(p);
+        let v = &self.views[j as usize * self.views_u + i as usize];
+        let (w, h) = ((self.holes_x * self.k) as i64, (self.holes_y * self.k) as i64);
+        let (ox, oy) = (x as i64 * self.k as i64, y as i64 * self.k as i64);
+        let mut out = Vec::new();
+        for cy in 0..v.height {
+            for cx in 0..v.width {
+                let (gx, gy) = (ox + v.x0 + cx as i64, oy + v.y0 + cy as i64);
+                let value = v.weights[cy * v.width + cx];
+                if value != 0.0 && (0..w).contains(&gx) && (0..h).contains(&gy) {
+                    out.push(((gy * w + gx) as u32, value));
+                }
+            }
+        }
+        out
+    }
+
+    /// Band `band` of the N-band light field `l` as one plane per view, `[v][y][x]`.
+    fn planes(&self, l: &[f32], n_bands: usize, band: usize) -> Vec<f32> {
+        let (nx, ny, nu) = (self.holes_x, self.holes_y, self.views_u);
+        let frame_w = nx * nu;
+        let mut planes = vec![0f32; self.n_views() * ny * nx];
+        planes.par_chunks_mut(ny * nx).enumerate().for_each(|(v, plane)| {
+            let (i, j) = (v % nu, v / nu);
+            for y in 0..ny {
+                let row = (y * self.views_v + j) * frame_w;
+                for (x, slot) in plane[y * nx..(y + 1) * nx].iter_mut().enumerate() {
+                    *slot = l[(row + x * nu + i) * n_bands + band];
+                }
+            }
+        });
+        planes
+    }
+
+    /// out[r·3 + a] (+)= c[a]·(T L_band)_r, or with `term` ∂T/∂W_term instead of T.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_band(
+        &self,
+        term: Option<usize>,
+        l: &[f32],
+        n_bands: usize,
+        band: usize,
+        c: [f32; 3],
+        accumulate: bool,
+        out: &mut [f32],
+    ) {
+        assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
+        assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
+        let planes = self.planes(l, n_bands, band);
+        let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
+        let width = nx * k;
+        let plane_len = nx * ny;
+        let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
+        let rows_per_task = (ny * k / (4 * rayon::current_num_threads().max(1))).max(1);
+        out.par_chunks_mut(rows_per_task * width * 3)
+            .enumerate()
+            .for_each(|(chunk, rows)| {
+                // The row being summed, phase-major: phase φ's holes at [φ·nx, (φ + 1)·nx).
+                let mut acc = vec![0f32; k * nx];
+                for (r, out_row) in rows.chunks_exact_mut(width * 3).enumerate() {
+                    let gy = (chunk * rows_per_task + r) as i64;
+                    acc.iter_mut().for_each(|a| *a = 0.0);
+                    for (v, st) in self.views.iter().enumerate() {
+                        let values = st.values(term);
+                        let plane = &planes[v * plane_len..(v + 1) * plane_len];
+                        for cy in 0..st.height {
+                            let num = gy - st.y0 - cy as i64;
+                            if num < 0 {
+                                break;
+                            }
+                            if num % k as i64 != 0 || num / k as i64 >= ny as i64 {
+                                continue;
+                            }
+                            let y = (num / k as i64) as usize;
+                            let src = &plane[y * nx..(y + 1) * nx];
+                            let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
+                            for (&w, &(phase, s)) in kernel_row.iter().zip(&tables[v]) {
+                                if w == 0.0 {
+                                    continue;
+                                }
+                                let range = overlap(nx, s);
+                                if range.is_empty() {
+                                    continue;
+                                }
+                                let dst = &mut acc[phase * nx..(phase + 1) * nx];
+                                let (d0, s0) = ((range.start as i64 + s) as usize, range.start);
+                                let len = range.len();
+                                axpy(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
+                            }
+                        }
+                    }
+                    for (g, o) in out_row.chunks_exact_mut(3).enumerate() {
+                        let value = acc[(g % k) * nx + g / k];
+                        for (slot, ca) in o.iter_mut().zip(c) {
+                            *slot = if accumulate { *slot + ca * value } else { ca * value };
+                        }
+                    }
+                }
+            });
+    }
+
+    /// The adjoint of [`Self::forward_band`]: out[p·N + band] = Σ_a c[a]·(Tᵀ y_a)_p; the other bands'
+    /// entries are left as they are.
+    #[allow(clippy::too_many_arguments)]
+    pub fn adjoint_band(
+        &self,
+        term: Option<usize>,
+        y: &[f32],
+        n_bands: usize,
+        band: usize,
+        c: [f32; 3],
+        out: &mut [f32],
+    ) {
+        assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
+        assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
+        let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
+        let width = nx * k;
+        // ỹ = Σ_a c_a y_a, each row phase-major like the forward's accumulator.
+        let mut coupled = vec![0f32; ny * k * width];
+        coupled.par_chunks_mut(width).enumerate().for_each(|(gy, row)| {
+            for g in 0..width {
+                let px = &y[(gy * width + g) * 3..(gy * width + g) * 3 + 3];
+                row[(g % k) * nx + g / k] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+            }
+        });
+        let plane_len = nx * ny;
+        let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
+        let mut planes = vec![0f32; self.n_views() * plane_len];
+        planes.par_chunks_mut(nx).enumerate().for_each(|(row, dst)| {
+            let (v, yy) = (row / ny, row % ny);
+            let st = &self.views[v];
+            let values = st.values(term);
+            let table = &tables[v];
+            for cy in 0..st.height {
+                let gy = (yy * k) as i64 + st.y0 + cy as i64;
+                if gy < 0 || gy >= (ny * k) as i64 {
+                    continue;
+                }
+                let src_row = &coupled[gy as usize * width..(gy as usize + 1) * width];
+                let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
+                for (&w, &(phase, s)) in kernel_row.iter().zip(table) {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let range = overlap(nx, s);
+                    if range.is_empty() {
+                        continue;
+                    }
+                    let src = &src_row[phase * nx..(phase + 1) * nx];
+                    let (s0, d0) = ((range.start as i64 + s) as usize, range.start);
+                    let len = range.len();
+                    axpy(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
+                }
+            }
+        });
+        let nu = self.views_u;
+        let frame_w = nx * nu;
+        out.par_chunks_mut(frame_w * n_bands)
+            .enumerate()
+            .for_each(|(row, dst)| {
+                let (yy, j) = (row / self.views_v, row % self.views_v);
+                for col in 0..frame_w {
+                    let (x, i) = (col / nu, col % nu);
+                    dst[col * n_bands + band] = planes[(j * nu + i) * plane_len + yy * nx + x];
+                }
+            });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::transport::rng::SplitMix64;
+
+    /// A small display with 5×4 holes and 3×2 views (geometry otherwise the paper's; only the counts matter).
+    fn display() -> DisplayGeometry {
+        DisplayGeometry {
+            holes_x: 5,
+            holes_y: 4,
+            views_u: 3,
+            views_v: 2,
+            ..DisplayGeometry::paper()
+        }
+    }
+
+    /// Random kernels: boxes that start left of, at and right of the hole origin and reach past the grid,
+    /// with some zero taps, and one derivative term.
+    fn operator(d: &DisplayGeometry, k: u32, seed: u64) -> StencilOperator {
+        let mut rng = SplitMix64(seed);
+        let views = (0..d.views_u * d.views_v)
+            .map(|_| {
+                let x0 = (rng.next_f64() * 14.0) as i64 - 9;
+                let y0 = (rng.next_f64() * 14.0) as i64 - 9;
+                let (w, h) = (1 + (rng.next_f64() * 11.0) as i64, 1 + (rng.next_f64() * 9.0) as i64);
+                let mut taps = Vec::new();
+                let mut dvals = Vec::new();
+                for dy in y0..y0 + h {
+                    for dx in x0..x0 + w {
+                        let v = rng.next_f64();
+                        let value = if v < 0.2 { 0.0 } else { v as f32 };
+                        taps.push((dx, dy, value));
+                        dvals.push([rng.next_f64() as f32 - 0.5]);
+                    }
+                }
+                let taps: Vec<(i64, i64, f32, &[f32])> = taps
+                    .iter()
+                    .zip(&dvals)
+                    .map(|(t, dv)| (t.0, t.1, t.2, dv.as_slice()))
+                    .collect();
+                ViewStencil::from_taps(&taps, 1)
+            })
+            .collect();
+        StencilOperator::new(d, k, views)
+    }
+
+    fn random(n: usize, seed: u64) -> Vec<f32> {
+        let mut rng = SplitMix64(seed);
+        (0..n).map(|_| rng.next_f64() as f32 - 0.3).collect()
+    }
+
+    /// T's columns written out one by one from the kernels' definition: (x·k + dx, y·k + dy) ← K_v(dx, dy).
+    fn dense(op: &StencilOperator, d: &DisplayGeometry, term: Option<usize>) -> Vec<Vec<f64>> {
+        let (w, h) = ((op.holes_x * op.k) as i64, (op.holes_y * op.k) as i64);
+        let mut t = vec![vec![0f64; op.n_samples()]; op.n_pixels()];
+        for (p, column) in (0..op.n_samples()).map(|p| (p, d.sample_coords(p))) {
+            let (x, y, i, j) = column;
+            let v = &op.views[(j * d.views_u + i) as usize];
+            let values = v.values(term);
+            for cy in 0..v.height {
+                for cx in 0..v.width {
+                    let gx = x as i64 * op.k as i64 + v.x0 + cx as i64;
+                    let gy = y as i64 * op.k as i64 + v.y0 + cy as i64;
+                    if (0..w).contains(&gx) && (0..h).contains(&gy) {
+                        t[(gy * w + gx) as usize][p] += values[cy * v.width + cx] as f64;
+                    }
+                }
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn the_stencil_products_equal_the_written_out_matrix_and_its_transpose() {
+        let d = display();
+        let n_bands = 3;
+        let c = [0.7f32, -0.2, 0.4];
+        for k in 1..=3 {
+            let op = operator(&d, k, 11 + k as u64);
+            for term in [None, Some(0)] {
+                let t = dense(&op, &d, term);
+                let l = random(op.n_samples() * n_bands, 3);
+                let y = random(op.n_pixels() * 3, 4);
+                // Forward, band 1, accumulated onto a non-zero image.
+                let mut out = random(op.n_pixels() * 3, 5);
+                let before = out.clone();
+                op.forward_band(term, &l, n_bands, 1, c, true, &mut out);
+                for r in 0..op.n_pixels() {
+                    let s: f64 = (0..op.n_samples()).map(|p| t[r][p] * l[p * n_bands + 1] as f64).sum();
+                    for a in 0..3 {
+                        let want = before[r * 3 + a] as f64 + c[a] as f64 * s;
+                        assert!(
+                            (out[r * 3 + a] as f64 - want).abs() < 1e-4,
+                            "k {k} {term:?} forward r {r}"
+                        );
+                    }
+                }
+                // Adjoint into band 2; bands 0 and 1 untouched.
+                let mut back = random(op.n_samples() * n_bands, 6);
+                let kept = back.clone();
+                op.adjoint_band(term, &y, n_bands, 2, c, &mut back);
+                for p in 0..op.n_samples() {
+                    let want: f64 = (0..op.n_pixels())
+                        .map(|r| t[r][p] * (0..3).map(|a| c[a] as f64 * y[r * 3 + a] as f64).sum::<f64>())
+                        .sum();
+                    assert!(
+                        (back[p * n_bands + 2] as f64 - want).abs() < 1e-4,
+                        "k {k} {term:?} adjoint p {p}"
+                    );
+                    assert_eq!(back[p * n_bands], kept[p * n_bands]);
+                    assert_eq!(back[p * n_bands + 1], kept[p * n_bands + 1]);
+                }
+                if term.is_none() {
+                    let nnz = t.iter().flatten().filter(|v| **v != 0.0).count();
+                    assert_eq!(op.nnz(), nnz, "k {k}");
+                    for p in [0, 7, op.n_samples() - 1] {
+                        let col: Vec<(u32, f32)> = op.column(&d, p);
+                        let want: Vec<(u32, f64)> = (0..op.n_pixels())
+                            .filter(|r| t[*r][p] != 0.0)
+                            .map(|r| (r as u32, t[r][p]))
+                            .collect();
+                        assert_eq!(col.len(), want.len());
+                        for (a, b) in col.iter().zip(&want) {
+                            assert_eq!(a.0, b.0);
+                            assert!((a.1 as f64 - b.1).abs() < 1e-6);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
