@@ -137,7 +137,7 @@ pub struct BenchArgs {
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
     pub sub_rays: u32,
-    /// Which benchmark: transport, solver, encode or all.
+    /// Which benchmark: transport, wave, solver, encode or all.
     #[arg(long, default_value = "all")]
     pub section: String,
     /// Markdown file whose `<!-- bench:… -->` sections are replaced with the new figures.

@@ -201,6 +201,194 @@ fn transport_table(
     Ok(out)
 }
 
+/// The multiply-add peak of this build's vector code on every thread, GFLOP/s (2 FLOPs per multiply-add):
+/// four independent 16-lane chains of `x ← x·a + b` that stay in registers, the instruction mix of the
+/// stencils' AXPYs without their loads. The roofline the wave operator is measured against.
+pub fn peak_gflops() -> f64 {
+    const STEPS: usize = 4_000_000;
+    let threads = rayon::current_num_threads();
+    let best = time_best(3, || {
+        let sink: f32 = (0..threads)
+            .into_par_iter()
+            .map(|t| {
+                let a = std::hint::black_box(0.999_999f32);
+                let b = std::hint::black_box(1e-7f32 * (t + 1) as f32);
+                let mut acc = [[1f32; 16]; 4];
+                for _ in 0..STEPS {
+                    for chain in acc.iter_mut() {
+                        for x in chain.iter_mut() {
+                            *x = *x * a + b;
+                        }
+                    }
+                }
+                acc.iter().flatten().sum::<f32>()
+            })
+            .sum();
+        std::hint::black_box(sink);
+    });
+    (threads * STEPS * 64 * 2) as f64 / best / 1e9
+}
+
+/// One display's wave-optics figures: one person's per-band kernels built, and the products
+/// S = Σ_n c_n T_n L_n and its adjoint, against the geometric CSR operator of the same display.
+struct WaveFigures {
+    name: String,
+    display: DisplayGeometry,
+    build: f64,
+    forward: f64,
+    adjoint: f64,
+    /// Multiply-adds of one product, all bands.
+    mads: usize,
+    /// Bytes the stencils hold, all bands.
+    bytes: usize,
+    /// Bytes the same operators would take expanded as CSR (T and Tᵀ: index and value per entry, row pointers).
+    csr_bytes: usize,
+    /// Mean and largest kernel taps per view, over bands.
+    taps: (f64, usize),
+    geometric_forward: f64,
+    geometric_adjoint: f64,
+}
+
+fn wave_figures(name: &str, sub_rays: u32) -> Result<WaveFigures> {
+    use eyekey_core::physics::observer::{transports, Lens};
+    let display = DisplayGeometry::preset(name)?;
+    let w = bench_wavefront()?;
+    let opts = TransportOptions {
+        sub_rays,
+        ..Default::default()
+    };
+    let lens = Lens::Eye {
+        wavefront: &w,
+        reference_nm: 555.0,
+    };
+    let cache = TransportCache::disabled();
+    let mut built = None;
+    let build = time_best(3, || {
+        built = Some(transports(
+            &display,
+            lens,
+            EyePosition::default(),
+            &opts,
+            Optics::Wave,
+            &cache,
+        ))
+    });
+    let ts = built.context("wave build")??;
+    let n = display.n_bands();
+    let coupling: Vec<[f32; 3]> = (0..n).map(|k| [0.3 + 0.1 * k as f32, 0.5, 0.2]).collect();
+    let samples = ts[0].n_samples();
+    let l: Vec<f32> = (0..samples * n).map(|i| (i % 13) as f32 / 13.0).collect();
+    let mut y = vec![0f32; ts[0].n_pixels() * 3];
+    let mut x = vec![0f32; samples * n];
+    let forward = time_best(10, || {
+        for (band, t) in ts.iter().enumerate() {
+            t.forward_band_lms(None, &l, n, band, coupling[band], band > 0, &mut y);
+        }
+    });
+    let adjoint = time_best(10, || {
+        for (band, t) in ts.iter().enumerate() {
+            t.adjoint_band_lms(None, &y, n, band, coupling[band], &mut x);
+        }
+    });
+    let mads: usize = ts.iter().map(|t| t.nnz()).sum();
+    let bytes: usize = ts.iter().map(|t| t.memory_bytes()).sum();
+    let csr_bytes: usize = ts
+        .iter()
+        .map(|t| t.nnz() * 16 + (t.n_pixels() + t.n_samples() + 2) * 4)
+        .sum();
+    let views = (display.views_u * display.views_v) as usize;
+    let taps = (
+        mads as f64 / (ts.len() * samples) as f64,
+        ts.iter()
+            .flat_map(|t| {
+                (0..views).map(|v| {
+                    t.column(
+                        &display,
+                        display.sample_index(
+                            display.holes_x / 2,
+                            display.holes_y / 2,
+                            (v % display.views_u as usize) as u32,
+                            (v / display.views_u as usize) as u32,
+                        ),
+                    )
+                    .len()
+                })
+            })
+            .max()
+            .unwrap_or(0),
+    );
+    let (_, geometric) = time_kernels(&display, sub_rays)?;
+    Ok(WaveFigures {
+        name: name.to_string(),
+        display,
+        build,
+        forward,
+        adjoint,
+        mads,
+        bytes,
+        csr_bytes,
+        taps,
+        geometric_forward: geometric.forward,
+        geometric_adjoint: geometric.adjoint,
+    })
+}
+
+/// The `wave` section: the wave-optics operator (per-view stencils, docs/design.md §2.7) on the paper,
+/// lenslet, pinhole and secure presets, against the geometric CSR kernels of the same display and against the
+/// multiply-add roofline, all measured in the same run.
+pub fn wave_bench(sub_rays: u32) -> Result<String> {
+    let peak = peak_gflops();
+    let mut out = format!(
+        "Roofline: {peak:.1} GFLOP/s, the multiply-add peak of this build's vector code on {} threads          (`peak_gflops`: register-resident chains, no loads). The stencils' inputs and outputs stay in cache          (the kernels take a few MiB), so the products are compute-bound and FLOPs (2 per multiply-add) are          the measure. \"Geometric\" is the same display's traced CSR operator and fused kernels (one T for          every band), built and timed in the same run.\n\n",
+        rayon::current_num_threads()
+    );
+    out.push_str(&table_header(&[
+        "display",
+        "kernel taps per sample (mean / largest)",
+        "one person's 4-band kernels built",
+        "stencils held",
+        "as CSR it would take",
+        "S = Σ c_n T_n L_n",
+        "adjoint",
+        "fraction of roofline (forward / adjoint)",
+        "geometric CSR A·L / Aᵀ·y",
+        "wave / geometric time (forward / adjoint)",
+    ]));
+    for name in ["paper", "lenslet", "pinhole", "secure"] {
+        let f = wave_figures(name, sub_rays)?;
+        let d = &f.display;
+        let flops = 2.0 * f.mads as f64;
+        writeln!(
+            out,
+            "| {} ({}×{} holes, {}×{} views) | {:.0} / {} | {:.3} s | {:.2} MiB | {:.0} MiB | {:.2} ms | {:.2} ms | {:.0} % / {:.0} % | {:.2} / {:.2} ms | {:.1}× / {:.1}× |",
+            f.name,
+            d.holes_x,
+            d.holes_y,
+            d.views_u,
+            d.views_v,
+            f.taps.0,
+            f.taps.1,
+            f.build,
+            f.bytes as f64 / (1 << 20) as f64,
+            f.csr_bytes as f64 / (1 << 20) as f64,
+            f.forward * 1e3,
+            f.adjoint * 1e3,
+            100.0 * flops / f.forward / 1e9 / peak,
+            100.0 * flops / f.adjoint / 1e9 / peak,
+            f.geometric_forward * 1e3,
+            f.geometric_adjoint * 1e3,
+            f.forward / f.geometric_forward,
+            f.adjoint / f.geometric_adjoint,
+        )?;
+    }
+    writeln!(
+        out,
+        "\npeak resident memory: {:.0} MB",
+        peak_memory_bytes() as f64 / 1e6
+    )?;
+    Ok(out)
+}
+
 /// A multiplex problem on `display` with `k` observers (target + representative + population decoys).
 pub struct BenchProblem {
     /// Observers (target first).
@@ -405,7 +593,7 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
 }
 
 /// The benchmark sections `eyekey bench --section` accepts besides `all`, in the order they run.
-const SECTIONS: [&str; 3] = ["transport", "solver", "encode"];
+const SECTIONS: [&str; 4] = ["transport", "wave", "solver", "encode"];
 
 /// What every section of one `eyekey bench` run shares.
 struct BenchRun<'a> {
@@ -423,7 +611,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let all = args.section == "all";
     if !all && !SECTIONS.contains(&args.section.as_str()) {
         bail!(
-            "--section must be transport, solver, encode or all, got {:?}",
+            "--section must be transport, wave, solver, encode or all, got {:?}",
             args.section
         );
     }
@@ -440,6 +628,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         if all || args.section == name {
             let body = match name {
                 "transport" => run.transport()?,
+                "wave" => run.wave()?,
                 "solver" => run.solver()?,
                 _ => run.encode()?,
             };
@@ -458,6 +647,16 @@ impl BenchRun<'_> {
             self.stamp,
             self.cmd,
             transport_bench(&self.display, self.args.sub_rays)?
+        ))
+    }
+
+    /// The `wave` section: the wave-optics stencils on four presets (the preset flag does not apply).
+    fn wave(&self) -> Result<String> {
+        Ok(format!(
+            "Measured {} by `eyekey bench --sub-rays {} --section wave` (release build):\n\n{}",
+            self.stamp,
+            self.args.sub_rays,
+            wave_bench(self.args.sub_rays)?
         ))
     }
 

@@ -123,11 +123,158 @@ fn overlap(n: usize, s: i64) -> std::ops::Range<usize> {
     lo.min(hi)..hi
 }
 
-/// dst[x] += a · src[x] over equal-length slices (the inner loop of both products).
+/// dst[x] += a · src[x] over equal-length slices (the inner loop of both products); with `FMA`, fused
+/// (only where the CPU has it: `mul_add` is a library call otherwise).
 #[inline(always)]
-fn axpy(dst: &mut [f32], a: f32, src: &[f32]) {
+fn axpy<const FMA: bool>(dst: &mut [f32], a: f32, src: &[f32]) {
     for (d, s) in dst.iter_mut().zip(src) {
-        *d += a * s;
+        *d = if FMA { a.mul_add(*s, *d) } else { *d + a * s };
+    }
+}
+
+/// The vector instructions the products are compiled for, chosen once at run time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Simd {
+    Avx512,
+    Avx2,
+    Baseline,
+}
+
+fn simd() -> Simd {
+    static SIMD: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
+    *SIMD.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma") {
+                return Simd::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                return Simd::Avx2;
+            }
+        }
+        Simd::Baseline
+    })
+}
+
+/// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the source planes (the
+/// light field's per-view planes for the forward, the coupled image for the adjoint) and the phase tables.
+struct Pass<'a> {
+    op: &'a StencilOperator,
+    term: Option<usize>,
+    source: &'a [f32],
+    tables: &'a [Vec<(usize, i64)>],
+}
+
+impl Pass<'_> {
+    /// Output row `gy` of the forward product into `acc` (phase-major: phase φ's holes at [φ·nx, (φ + 1)·nx)).
+    fn forward_row(&self, gy: i64, acc: &mut [f32]) {
+        match simd() {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `simd()` found the features the called function is compiled for.
+            Simd::Avx512 => unsafe { self.forward_row_avx512(gy, acc) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
+            Simd::Avx2 => unsafe { self.forward_row_avx2(gy, acc) },
+            _ => self.forward_row_with::<false>(gy, acc),
+        }
+    }
+
+    /// Sample row `row` (= v·ny + y) of the adjoint product into `dst` (one value per hole x).
+    fn adjoint_row(&self, row: usize, dst: &mut [f32]) {
+        match simd() {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `simd()` found the features the called function is compiled for.
+            Simd::Avx512 => unsafe { self.adjoint_row_avx512(row, dst) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
+            Simd::Avx2 => unsafe { self.adjoint_row_avx2(row, dst) },
+            _ => self.adjoint_row_with::<false>(row, dst),
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,fma")]
+    fn forward_row_avx512(&self, gy: i64, acc: &mut [f32]) {
+        self.forward_row_with::<true>(gy, acc)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn forward_row_avx2(&self, gy: i64, acc: &mut [f32]) {
+        self.forward_row_with::<true>(gy, acc)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,fma")]
+    fn adjoint_row_avx512(&self, row: usize, dst: &mut [f32]) {
+        self.adjoint_row_with::<true>(row, dst)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn adjoint_row_avx2(&self, row: usize, dst: &mut [f32]) {
+        self.adjoint_row_with::<true>(row, dst)
+    }
+
+    #[inline(always)]
+    fn forward_row_with<const FMA: bool>(&self, gy: i64, acc: &mut [f32]) {
+        let op = self.op;
+        let (nx, ny, k) = (op.holes_x, op.holes_y, op.k);
+        let plane_len = nx * ny;
+        for (v, st) in op.views.iter().enumerate() {
+            let values = st.values(self.term);
+            let plane = &self.source[v * plane_len..(v + 1) * plane_len];
+            for cy in 0..st.height {
+                let num = gy - st.y0 - cy as i64;
+                if num < 0 {
+                    break;
+                }
+                if num % k as i64 != 0 || num / k as i64 >= ny as i64 {
+                    continue;
+                }
+                let y = (num / k as i64) as usize;
+                let src = &plane[y * nx..(y + 1) * nx];
+                let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
+                for (&w, &(phase, s)) in kernel_row.iter().zip(&self.tables[v]) {
+                    let range = overlap(nx, s);
+                    if w == 0.0 || range.is_empty() {
+                        continue;
+                    }
+                    let dst = &mut acc[phase * nx..(phase + 1) * nx];
+                    let (d0, s0) = ((range.start as i64 + s) as usize, range.start);
+                    let len = range.len();
+                    axpy::<FMA>(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn adjoint_row_with<const FMA: bool>(&self, row: usize, dst: &mut [f32]) {
+        let op = self.op;
+        let (nx, ny, k) = (op.holes_x, op.holes_y, op.k);
+        let width = nx * k;
+        let (v, yy) = (row / ny, row % ny);
+        let st = &op.views[v];
+        let values = st.values(self.term);
+        for cy in 0..st.height {
+            let gy = (yy * k) as i64 + st.y0 + cy as i64;
+            if gy < 0 || gy >= (ny * k) as i64 {
+                continue;
+            }
+            let src_row = &self.source[gy as usize * width..(gy as usize + 1) * width];
+            let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
+            for (&w, &(phase, s)) in kernel_row.iter().zip(&self.tables[v]) {
+                let range = overlap(nx, s);
+                if w == 0.0 || range.is_empty() {
+                    continue;
+                }
+                let src = &src_row[phase * nx..(phase + 1) * nx];
+                let (s0, d0) = ((range.start as i64 + s) as usize, range.start);
+                let len = range.len();
+                axpy::<FMA>(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
+            }
+        }
     }
 }
 
@@ -247,8 +394,13 @@ impl StencilOperator {
         let planes = self.planes(l, n_bands, band);
         let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
         let width = nx * k;
-        let plane_len = nx * ny;
         let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
+        let pass = Pass {
+            op: self,
+            term,
+            source: &planes,
+            tables: &tables,
+        };
         let rows_per_task = (ny * k / (4 * rayon::current_num_threads().max(1))).max(1);
         out.par_chunks_mut(rows_per_task * width * 3)
             .enumerate()
@@ -258,35 +410,7 @@ impl StencilOperator {
                 for (r, out_row) in rows.chunks_exact_mut(width * 3).enumerate() {
                     let gy = (chunk * rows_per_task + r) as i64;
                     acc.iter_mut().for_each(|a| *a = 0.0);
-                    for (v, st) in self.views.iter().enumerate() {
-                        let values = st.values(term);
-                        let plane = &planes[v * plane_len..(v + 1) * plane_len];
-                        for cy in 0..st.height {
-                            let num = gy - st.y0 - cy as i64;
-                            if num < 0 {
-                                break;
-                            }
-                            if num % k as i64 != 0 || num / k as i64 >= ny as i64 {
-                                continue;
-                            }
-                            let y = (num / k as i64) as usize;
-                            let src = &plane[y * nx..(y + 1) * nx];
-                            let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
-                            for (&w, &(phase, s)) in kernel_row.iter().zip(&tables[v]) {
-                                if w == 0.0 {
-                                    continue;
-                                }
-                                let range = overlap(nx, s);
-                                if range.is_empty() {
-                                    continue;
-                                }
-                                let dst = &mut acc[phase * nx..(phase + 1) * nx];
-                                let (d0, s0) = ((range.start as i64 + s) as usize, range.start);
-                                let len = range.len();
-                                axpy(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
-                            }
-                        }
-                    }
+                    pass.forward_row(gy, &mut acc);
                     for (g, o) in out_row.chunks_exact_mut(3).enumerate() {
                         let value = acc[(g % k) * nx + g / k];
                         for (slot, ca) in o.iter_mut().zip(c) {
@@ -324,33 +448,16 @@ impl StencilOperator {
         let plane_len = nx * ny;
         let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
         let mut planes = vec![0f32; self.n_views() * plane_len];
-        planes.par_chunks_mut(nx).enumerate().for_each(|(row, dst)| {
-            let (v, yy) = (row / ny, row % ny);
-            let st = &self.views[v];
-            let values = st.values(term);
-            let table = &tables[v];
-            for cy in 0..st.height {
-                let gy = (yy * k) as i64 + st.y0 + cy as i64;
-                if gy < 0 || gy >= (ny * k) as i64 {
-                    continue;
-                }
-                let src_row = &coupled[gy as usize * width..(gy as usize + 1) * width];
-                let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
-                for (&w, &(phase, s)) in kernel_row.iter().zip(table) {
-                    if w == 0.0 {
-                        continue;
-                    }
-                    let range = overlap(nx, s);
-                    if range.is_empty() {
-                        continue;
-                    }
-                    let src = &src_row[phase * nx..(phase + 1) * nx];
-                    let (s0, d0) = ((range.start as i64 + s) as usize, range.start);
-                    let len = range.len();
-                    axpy(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
-                }
-            }
-        });
+        let pass = Pass {
+            op: self,
+            term,
+            source: &coupled,
+            tables: &tables,
+        };
+        planes
+            .par_chunks_mut(nx)
+            .enumerate()
+            .for_each(|(row, dst)| pass.adjoint_row(row, dst));
         let nu = self.views_u;
         let frame_w = nx * nu;
         out.par_chunks_mut(frame_w * n_bands)
