@@ -201,34 +201,6 @@ fn transport_table(
     Ok(out)
 }
 
-/// The multiply-add peak of this build's vector code on every thread, GFLOP/s (2 FLOPs per multiply-add):
-/// four independent 16-lane chains of `x ← x·a + b` that stay in registers, the instruction mix of the
-/// stencils' AXPYs without their loads. The roofline the wave operator is measured against.
-pub fn peak_gflops() -> f64 {
-    const STEPS: usize = 4_000_000;
-    let threads = rayon::current_num_threads();
-    let best = time_best(3, || {
-        let sink: f32 = (0..threads)
-            .into_par_iter()
-            .map(|t| {
-                let a = std::hint::black_box(0.999_999f32);
-                let b = std::hint::black_box(1e-7f32 * (t + 1) as f32);
-                let mut acc = [[1f32; 16]; 4];
-                for _ in 0..STEPS {
-                    for chain in acc.iter_mut() {
-                        for x in chain.iter_mut() {
-                            *x = *x * a + b;
-                        }
-                    }
-                }
-                acc.iter().flatten().sum::<f32>()
-            })
-            .sum();
-        std::hint::black_box(sink);
-    });
-    (threads * STEPS * 64 * 2) as f64 / best / 1e9
-}
-
 /// One display's wave-optics figures: one person's per-band kernels built, and the products
 /// S = Σ_n c_n T_n L_n and its adjoint, against the geometric CSR operator of the same display.
 struct WaveFigures {
@@ -337,9 +309,14 @@ fn wave_figures(name: &str, sub_rays: u32) -> Result<WaveFigures> {
 /// lenslet, pinhole and secure presets, against the geometric CSR kernels of the same display and against the
 /// multiply-add roofline, all measured in the same run.
 pub fn wave_bench(sub_rays: u32) -> Result<String> {
-    let peak = peak_gflops();
+    let peak = eyekey_core::physics::transport::multiply_add_peak_gflops(20_000_000);
     let mut out = format!(
-        "Roofline: {peak:.1} GFLOP/s, the multiply-add peak of this build's vector code on {} threads          (`peak_gflops`: register-resident chains, no loads). The stencils' inputs and outputs stay in cache          (the kernels take a few MiB), so the products are compute-bound and FLOPs (2 per multiply-add) are          the measure. \"Geometric\" is the same display's traced CSR operator and fused kernels (one T for          every band), built and timed in the same run.\n\n",
+        "Roofline: {peak:.1} GFLOP/s, the multiply-add peak of the stencils' own vector code ({}) on {} \
+         threads (`multiply_add_peak_gflops`: register-resident chains, no loads or stores). The kernels take \
+         a few hundred KiB and a light field a few MiB, so the products run from cache and are compute-bound: \
+         FLOPs (2 per multiply-add) are the measure. \"Geometric\" is the same display's traced CSR operator \
+         and fused kernels (one T for every band), built and timed in the same run.\n\n",
+        eyekey_core::physics::transport::vector_isa(),
         rayon::current_num_threads()
     );
     out.push_str(&table_header(&[

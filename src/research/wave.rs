@@ -192,6 +192,66 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str, fourier: bool) ->
         let f = s.fourier.map_or("–".to_string(), |v| format!("{v:.2}"));
         writeln!(md, "| {name} | {:.2} | {:.2} | {f} |", s.geometric, s.wave)?;
     }
+    md.push_str(&band_sampling(
+        display,
+        &[&target, &bystander],
+        &wave.light_field,
+        &document,
+        &cache,
+    )?);
     std::fs::write(out.join("results.md"), &md)?;
+    Ok(md)
+}
+
+/// How many wavelengths a band needs (docs/design.md §2.7): the wave-encoded frames scored with each band
+/// as 1, 3 (the default) and 5 wavelengths of equal power, and how far the views move (relative RMS against
+/// 5 wavelengths).
+fn band_sampling(
+    display: &DisplayGeometry,
+    people: &[&VisionProfile],
+    l: &[f32],
+    document: &image::RgbImage,
+    cache: &TransportCache,
+) -> Result<String> {
+    let mut md = String::from(
+        "\nWavelengths per band (the wave-encoded frames; the encoder used the default, 3):\n\n| wavelengths per band | target legibility | target view vs 5 wavelengths (relative RMS) | bystander legibility |\n| --- | --- | --- | --- |\n",
+    );
+    let eye = EyePosition::default();
+    let views = |q: u32| -> Result<Vec<(f64, Vec<f32>)>> {
+        let topts = TransportOptions {
+            sub_rays: 16,
+            seed: 0xE7A1,
+            wavelengths_per_band: q,
+            ..Default::default()
+        };
+        people
+            .iter()
+            .map(|p| {
+                let o = Observer::new(display, p, eye, &topts, Optics::Wave, cache)?;
+                let grid = o.grid();
+                let reference = Reference::new(document, grid.width, grid.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+                let view = o.view(l);
+                Ok((reference.score_lms("band sampling", &view, o.white).legibility, view))
+            })
+            .collect()
+    };
+    let finest = views(5)?;
+    for q in [1, 3, 5] {
+        let v = views(q)?;
+        let (t, b) = (&v[0], &v[1]);
+        let num: f64 =
+            t.1.iter()
+                .zip(&finest[0].1)
+                .map(|(a, b)| ((a - b) as f64).powi(2))
+                .sum();
+        let den: f64 = finest[0].1.iter().map(|b| (*b as f64).powi(2)).sum();
+        writeln!(
+            md,
+            "| {q} | {:.2} | {:.3} | {:.2} |",
+            t.0,
+            (num / den.max(1e-30)).sqrt(),
+            b.0
+        )?;
+    }
     Ok(md)
 }

@@ -217,8 +217,9 @@ impl Lens<'_> {
     }
 }
 
-/// The transport operators of `lens` at `eye`: one (geometric optics) or one per band (wave optics: each at the
-/// band's centroid wavelength, with its diffraction and the lens's chromatic defocus).
+/// The transport operators of `lens` at `eye`: one (geometric optics) or one per band (wave optics: each band's
+/// light as `options.wavelengths_per_band` wavelengths of equal power, each with its diffraction and the
+/// lens's chromatic defocus, mixed: T_n = (1/q) Σ_q T(λ_q)).
 pub fn transports(
     display: &DisplayGeometry,
     lens: Lens<'_>,
@@ -237,20 +238,44 @@ pub fn transports(
         }
         Optics::Wave => {
             let pupil_mm = 2.0 * lens.wavefront().pupil_radius_mm();
+            let q = options.wavelengths_per_band.max(1);
             display
                 .projectors
                 .iter()
                 .map(|p| {
-                    let lambda = p.centroid_nm();
-                    let opts = TransportOptions {
+                    // The band as q wavelengths of equal power, the rays shared among them.
+                    let lambdas = p.band_wavelengths_nm(q as usize);
+                    let part_options = |lambda: f64| TransportOptions {
+                        sub_rays: options.sub_rays.div_ceil(q),
                         wave: Some(WaveSampling {
                             wavelength_nm: lambda,
                             neighbour_blocks: neighbour_blocks(display, lambda, pupil_mm, eye),
-                            kernel_rays: KERNEL_RAYS_PER_SUB_RAY * options.sub_rays,
+                            kernel_rays: KERNEL_RAYS_PER_SUB_RAY * options.sub_rays / q,
                         }),
                         ..options.clone()
                     };
-                    cache.get_or_build(display, &lens.at(lambda), eye, &opts)
+                    if q == 1 {
+                        return cache.get_or_build(display, &lens.at(lambdas[0]), eye, &part_options(lambdas[0]));
+                    }
+                    let parts: Vec<(ZernikeCoefficients, TransportOptions)> =
+                        lambdas.iter().map(|&l| (lens.at(l), part_options(l))).collect();
+                    let key = serde_json::json!({
+                        "band": lambdas, "display": display, "eye": eye,
+                        "parts": parts.iter().map(|(w, o)| serde_json::json!({
+                            "wavefront": w, "sub_rays": o.sub_rays, "seed": o.seed,
+                            "oversample": o.retina_oversample, "terms": o.derivative_terms, "wave": o.wave,
+                        })).collect::<Vec<_>>(),
+                    })
+                    .to_string();
+                    cache.get_or_insert_with(key, || {
+                        let built = parts
+                            .iter()
+                            .map(|(w, o)| TransportMatrix::build(display, w, eye, o))
+                            .collect::<Result<Vec<_>, _>>()?;
+                        let weighted: Vec<(f64, &TransportMatrix)> =
+                            built.iter().map(|t| (1.0 / q as f64, t)).collect();
+                        Ok(TransportMatrix::mix(&weighted))
+                    })
                 })
                 .collect()
         }

@@ -95,6 +95,32 @@ impl ProjectorSpectrum {
         values
     }
 
+    /// `q` wavelengths that stand for the band: its power cut into q bins of equal power (on the 1-nm grid,
+    /// a grid step's power split where a bin edge falls inside it), each bin's power-weighted mean. With
+    /// q = 1, the centroid.
+    pub fn band_wavelengths_nm(&self, q: usize) -> Vec<f64> {
+        let q = q.max(1);
+        let e = self.power_on_grid();
+        let total: f64 = e.iter().sum();
+        if total <= 0.0 {
+            return vec![self.centroid_nm(); q];
+        }
+        let share = total / q as f64;
+        let (mut sums, mut moments) = (vec![0f64; q], vec![0f64; q]);
+        let mut below = 0.0;
+        for (l, &v) in wavelengths_nm().zip(&e) {
+            // This step holds the cumulative power [below, below + v]; each bin takes its overlap.
+            for (j, (s, m)) in sums.iter_mut().zip(moments.iter_mut()).enumerate() {
+                let (lo, hi) = (j as f64 * share, (j + 1) as f64 * share);
+                let take = ((below + v).min(hi) - below.max(lo)).max(0.0);
+                *s += take;
+                *m += take * l;
+            }
+            below += v;
+        }
+        sums.iter().zip(&moments).map(|(s, m)| m / s.max(1e-300)).collect()
+    }
+
     /// The power-weighted mean wavelength of the band, nm: Σ λ·E(λ) / Σ E(λ) on the grid.
     pub fn centroid_nm(&self) -> f64 {
         let e = self.power_on_grid();
@@ -164,4 +190,39 @@ pub fn paper_projectors() -> Vec<ProjectorSpectrum> {
             fwhm_nm: 20.0,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_band_is_cut_into_equal_power_bins_whose_mean_is_its_centroid() {
+        let band = ProjectorSpectrum::Gaussian {
+            centre_nm: 450.0,
+            fwhm_nm: 20.0,
+        };
+        let centroid = band.centroid_nm();
+        assert!((band.band_wavelengths_nm(1)[0] - centroid).abs() < 1e-9);
+        for q in [2, 3, 5] {
+            let l = band.band_wavelengths_nm(q);
+            // Equal powers: the bins' centroids average to the band's.
+            let mean = l.iter().sum::<f64>() / q as f64;
+            assert!((mean - centroid).abs() < 1e-9, "q {q}: {mean} vs {centroid}");
+            // A symmetric band gives symmetric bins, ascending.
+            for j in 0..q {
+                assert!(((l[j] - centroid) + (l[q - 1 - j] - centroid)).abs() < 1e-6, "{l:?}");
+            }
+            assert!(l.windows(2).all(|w| w[0] < w[1]), "{l:?}");
+        }
+        // Three bins of a Gaussian (σ = FWHM/2.3548): the outer bins' centroids lie at ±σ·φ(z)/(1/3)
+        // with z = Φ⁻¹(2/3) = 0.430727 (the mean of a normal beyond z), ±1.0911σ = ±9.27 nm.
+        let sigma = 20.0 / (8.0 * 2f64.ln()).sqrt();
+        let z = 0.430_727_3f64;
+        let phi = (-z * z / 2.0).exp() / (2.0 * std::f64::consts::PI).sqrt();
+        let outer = sigma * phi * 3.0;
+        let l = band.band_wavelengths_nm(3);
+        assert!((l[2] - centroid - outer).abs() < 0.05, "{} vs {outer}", l[2] - centroid);
+        assert!((l[1] - centroid).abs() < 1e-6);
+    }
 }

@@ -77,6 +77,16 @@ impl TransportCache {
             "oversample": options.retina_oversample, "terms": options.derivative_terms, "wave": options.wave,
         })
         .to_string();
+        self.get_or_insert_with(key, || TransportMatrix::build(display, wavefront, eye, options))
+    }
+
+    /// The operator cached under `key`, or `build`'s (built outside the lock, then cached): for operators
+    /// assembled from several builds (a band's wavelengths mixed), keyed by everything that determines them.
+    pub fn get_or_insert_with(
+        &self,
+        key: String,
+        build: impl FnOnce() -> Result<TransportMatrix, TransportError>,
+    ) -> Result<std::sync::Arc<TransportMatrix>, TransportError> {
         {
             let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
             g.tick += 1;
@@ -89,7 +99,7 @@ impl TransportCache {
             }
             g.misses += 1;
         }
-        let m = std::sync::Arc::new(TransportMatrix::build(display, wavefront, eye, options)?);
+        let m = std::sync::Arc::new(build()?);
         let size = m.memory_bytes();
         let mut g = self.inner.lock().unwrap_or_else(|e| e.into_inner());
         if size <= g.capacity_bytes {

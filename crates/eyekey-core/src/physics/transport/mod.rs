@@ -32,9 +32,9 @@ pub use cache::{TransportCache, DEFAULT_CAPACITY_BYTES};
 /// gigabytes, which no job should claim.
 pub const MAX_WAVE_OPERATOR_BYTES: usize = 256 << 20;
 pub use csr::CsrMatrix;
-pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling};
+pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND};
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
-pub use stencil::StencilOperator;
+pub use stencil::{multiply_add_peak_gflops, vector_isa, StencilOperator};
 
 use rayon::prelude::*;
 
@@ -130,6 +130,98 @@ pub struct TransportStats {
 }
 
 impl TransportMatrix {
+    /// Σ_q w_q·T_q (and ∂T/∂W_j alike): the operator of a band whose light is a mixture of the parts'
+    /// wavelengths with power fractions w_q (docs/design.md §2.7). The parts must come from the same display,
+    /// eye position and options, one wavelength each.
+    pub fn mix(parts: &[(f64, &TransportMatrix)]) -> Self {
+        assert!(!parts.is_empty(), "at least one part");
+        let first = parts[0].1;
+        let mut stats = TransportStats::default();
+        for (_, p) in parts {
+            stats.sub_rays_traced += p.stats.sub_rays_traced;
+            stats.sub_rays_in_pupil += p.stats.sub_rays_in_pupil;
+            stats.sub_rays_off_grid += p.stats.sub_rays_off_grid;
+            stats.holes_seen = stats.holes_seen.max(p.stats.holes_seen);
+        }
+        let repr = match &first.repr {
+            Repr::Stencil(_) => {
+                let ops: Vec<(f64, &StencilOperator)> = parts
+                    .iter()
+                    .map(|(w, p)| match &p.repr {
+                        Repr::Stencil(st) => (*w, st),
+                        Repr::Sparse(_) => panic!("mixed operators are held alike"),
+                    })
+                    .collect();
+                Repr::Stencil(StencilOperator::mix(&ops))
+            }
+            Repr::Sparse(_) => {
+                let mats: Vec<(f64, &Sparse)> = parts
+                    .iter()
+                    .map(|(w, p)| match &p.repr {
+                        Repr::Sparse(m) => (*w, m),
+                        Repr::Stencil(_) => panic!("mixed operators are held alike"),
+                    })
+                    .collect();
+                let n_terms = first.derivative_terms.len();
+                let n_rows = mats[0].1.adjoint.n_rows;
+                // Tᵀ row by row: every part's entries of the row, merged by retinal pixel.
+                let rows: Vec<Vec<(u32, f32, Vec<f32>)>> = (0..n_rows)
+                    .into_par_iter()
+                    .map(|r| {
+                        let mut entries: Vec<(u32, f32, Vec<f32>)> = Vec::new();
+                        for (w, m) in &mats {
+                            let a = &m.adjoint;
+                            for e in a.indptr[r] as usize..a.indptr[r + 1] as usize {
+                                let dw = m.derivative_adjoint.iter().map(|d| (w * d[e] as f64) as f32).collect();
+                                entries.push((a.indices[e], (w * a.values[e] as f64) as f32, dw));
+                            }
+                        }
+                        entries.sort_by_key(|e| e.0);
+                        let mut merged: Vec<(u32, f32, Vec<f32>)> = Vec::with_capacity(entries.len());
+                        for e in entries {
+                            match merged.last_mut() {
+                                Some(last) if last.0 == e.0 => {
+                                    last.1 += e.1;
+                                    last.2.iter_mut().zip(&e.2).for_each(|(a, b)| *a += b);
+                                }
+                                _ => merged.push(e),
+                            }
+                        }
+                        merged
+                    })
+                    .collect();
+                let mut indptr = Vec::with_capacity(n_rows + 1);
+                let (mut indices, mut values) = (Vec::new(), Vec::new());
+                let mut dvalues: Vec<Vec<f32>> = vec![Vec::new(); n_terms];
+                indptr.push(0u32);
+                for row in rows {
+                    for (c, v, dv) in row {
+                        indices.push(c);
+                        values.push(v);
+                        for (d, x) in dvalues.iter_mut().zip(dv) {
+                            d.push(x);
+                        }
+                    }
+                    indptr.push(indices.len() as u32);
+                }
+                let adjoint = CsrMatrix {
+                    n_rows,
+                    n_cols: mats[0].1.adjoint.n_cols,
+                    indptr,
+                    indices,
+                    values,
+                };
+                return trace::finish(first.grid, adjoint, dvalues, first.derivative_terms.clone(), stats);
+            }
+        };
+        TransportMatrix {
+            grid: first.grid,
+            derivative_terms: first.derivative_terms.clone(),
+            stats,
+            repr,
+        }
+    }
+
     /// Light-field samples per band (columns of T).
     pub fn n_samples(&self) -> usize {
         match &self.repr {
@@ -462,6 +554,72 @@ mod tests {
                 kernel_rays: 0,
             }),
             ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_mixed_operator_is_the_weighted_sum_of_its_parts_held_either_way() {
+        // Two wavelengths' operators, mixed 0.3/0.7: every product (T and ∂T/∂W) equals the same mixture of the
+        // parts' products, for the stencils (design distance) and for traced CSR (an eye 40 mm nearer).
+        let d = tiny();
+        for (eye, kernel_rays) in [
+            (EyePosition::default(), 512),
+            (
+                EyePosition {
+                    dz_mm: -40.0,
+                    ..Default::default()
+                },
+                0,
+            ),
+        ] {
+            let part = |lambda: f64| {
+                let opts = TransportOptions {
+                    sub_rays: 8,
+                    derivative_terms: vec![4],
+                    wave: Some(WaveSampling {
+                        wavelength_nm: lambda,
+                        neighbour_blocks: 1,
+                        kernel_rays,
+                    }),
+                    ..Default::default()
+                };
+                TransportMatrix::build(&d, &aberrated(6.0), eye, &opts).unwrap()
+            };
+            let (a, b) = (part(450.0), part(480.0));
+            assert_eq!(a.is_stencil(), kernel_rays > 0);
+            let m = TransportMatrix::mix(&[(0.3, &a), (0.7, &b)]);
+            assert_eq!(m.is_stencil(), a.is_stencil());
+            let c = coupling4();
+            let l = rand_vec(a.n_samples() * 4, 3);
+            let y = rand_vec(a.n_pixels() * 3, 4);
+            for term in [None, Some(0)] {
+                let forward = |t: &TransportMatrix| {
+                    let mut out = vec![0f32; t.n_pixels() * 3];
+                    match term {
+                        None => t.forward_lms(&l, &c, &mut out),
+                        Some(k) => t.derivative_forward_lms(k, &l, &c, &mut out),
+                    }
+                    out
+                };
+                let adjoint = |t: &TransportMatrix| {
+                    let mut out = vec![0f32; t.n_samples() * 4];
+                    match term {
+                        None => t.adjoint_lms(&y, &c, &mut out),
+                        Some(k) => t.derivative_adjoint_lms(k, &y, &c, &mut out),
+                    }
+                    out
+                };
+                for (got, pa, pb) in [
+                    (forward(&m), forward(&a), forward(&b)),
+                    (adjoint(&m), adjoint(&a), adjoint(&b)),
+                ] {
+                    let scale = got.iter().fold(0f32, |s, v| s.max(v.abs())).max(1e-6);
+                    for ((g, x), z) in got.iter().zip(&pa).zip(&pb) {
+                        let want = 0.3 * x + 0.7 * z;
+                        assert!((g - want).abs() <= 1e-5 * scale, "{eye:?} {term:?}: {g} vs {want}");
+                    }
+                }
+            }
         }
     }
 

@@ -156,6 +156,67 @@ fn simd() -> Simd {
     })
 }
 
+/// The multiply-add peak of the vector code the products dispatch to, on every rayon thread, GFLOP/s (2 FLOPs
+/// per multiply-add): eight independent 16-lane chains of x ← a·x + b that stay in registers, the stencils'
+/// arithmetic without their loads and stores. The roofline `eyekey bench --section wave` measures against.
+pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
+    #[inline(always)]
+    fn chains<const FMA: bool>(steps: usize, b: f32) -> f32 {
+        let a = std::hint::black_box(0.999_999f32);
+        let mut acc = [[1f32; 16]; 8];
+        for _ in 0..steps {
+            for chain in acc.iter_mut() {
+                for x in chain.iter_mut() {
+                    *x = if FMA { a.mul_add(*x, b) } else { a * *x + b };
+                }
+            }
+        }
+        acc.iter().flatten().sum()
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,fma")]
+    fn chains_avx512(steps: usize, b: f32) -> f32 {
+        chains::<true>(steps, b)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn chains_avx2(steps: usize, b: f32) -> f32 {
+        chains::<true>(steps, b)
+    }
+    let threads = rayon::current_num_threads();
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let start = std::time::Instant::now();
+        let sink: f32 = (0..threads)
+            .into_par_iter()
+            .map(|t| {
+                let b = std::hint::black_box(1e-7 * (t + 1) as f32);
+                match simd() {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: `simd()` found the features the called function is compiled for.
+                    Simd::Avx512 => unsafe { chains_avx512(steps, b) },
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: as above.
+                    Simd::Avx2 => unsafe { chains_avx2(steps, b) },
+                    _ => chains::<false>(steps, b),
+                }
+            })
+            .sum();
+        std::hint::black_box(sink);
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    (threads * steps * 128 * 2) as f64 / best / 1e9
+}
+
+/// The instruction set the products use: "avx512f+fma", "avx2+fma" or "baseline".
+pub fn vector_isa() -> &'static str {
+    match simd() {
+        Simd::Avx512 => "avx512f+fma",
+        Simd::Avx2 => "avx2+fma",
+        Simd::Baseline => "baseline",
+    }
+}
+
 /// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the source planes (the
 /// light field's per-view planes for the forward, the coupled image for the adjoint) and the phase tables.
 struct Pass<'a> {
@@ -293,6 +354,38 @@ impl StencilOperator {
             k: k.max(1) as usize,
             views,
         }
+    }
+
+    /// Σ_q w_q·K_q per view (and per derivative term): the operator of light that is a mixture of the
+    /// parts' wavelengths with power fractions w_q. All parts must share the display and the terms.
+    pub(crate) fn mix(parts: &[(f64, &StencilOperator)]) -> Self {
+        let first = parts[0].1;
+        let views = (0..first.views.len())
+            .map(|v| {
+                let n_terms = first.views[v].derivatives.len();
+                let mut taps: Vec<(i64, i64, f32, Vec<f32>)> = Vec::new();
+                for &(w, op) in parts {
+                    assert!(
+                        op.holes_x == first.holes_x && op.views.len() == first.views.len() && op.k == first.k,
+                        "mixed operators share the display"
+                    );
+                    let st = &op.views[v];
+                    for cy in 0..st.height {
+                        for cx in 0..st.width {
+                            let cell = cy * st.width + cx;
+                            let dw: Vec<f32> = st.derivatives.iter().map(|d| (w * d[cell] as f64) as f32).collect();
+                            let value = (w * st.weights[cell] as f64) as f32;
+                            if value != 0.0 || dw.iter().any(|x| *x != 0.0) {
+                                taps.push((st.x0 + cx as i64, st.y0 + cy as i64, value, dw));
+                            }
+                        }
+                    }
+                }
+                let refs: Vec<(i64, i64, f32, &[f32])> = taps.iter().map(|t| (t.0, t.1, t.2, t.3.as_slice())).collect();
+                ViewStencil::from_taps(&refs, n_terms)
+            })
+            .collect();
+        Self { views, ..first.clone() }
     }
 
     /// Light-field samples per band.
