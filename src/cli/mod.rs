@@ -79,6 +79,9 @@ pub enum ExperimentCommand {
         /// People sampled to check the proposed multiplex encoding (0 skips).
         #[arg(long, default_value_t = 50)]
         population: u32,
+        /// Forward model of the encoders and of every viewer: geometric (the paper's idealisation) or wave.
+        #[arg(long, value_enum, default_value = "geometric")]
+        optics: Optics,
     },
     /// Design-space sweep: target legibility against the fraction of a sampled population that can read.
     Sweep {
@@ -399,10 +402,11 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             max_iterations,
             population,
+            optics,
         }) => {
             print!(
                 "{}",
-                crate::research::experiment::paper(&out, max_iterations, population)?
+                crate::research::experiment::paper(&out, max_iterations, population, optics)?
             );
         }
         Command::Experiment(ExperimentCommand::Sweep {

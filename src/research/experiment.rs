@@ -108,6 +108,8 @@ fn strip(tiles: &[(String, RgbImage)]) -> RgbImage {
 /// observers' operators.
 struct PaperSetup {
     cache: TransportCache,
+    /// The forward model of the encoders and of every viewer.
+    optics: Optics,
     display: DisplayGeometry,
     observers: Vec<(String, VisionProfile)>,
     document: RgbImage,
@@ -122,7 +124,7 @@ struct PaperSetup {
 
 impl PaperSetup {
     /// Builds the setup on the `paper` preset and saves `document.png` into `out`.
-    fn new(out: &Path) -> Result<Self> {
+    fn new(out: &Path, optics: Optics) -> Result<Self> {
         let cache = TransportCache::default();
         let display = DisplayGeometry::paper();
         let observers = paper_observers();
@@ -137,7 +139,7 @@ impl PaperSetup {
         };
         let viewers: Vec<Observer> = observers
             .iter()
-            .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts, Optics::Geometric, &cache))
+            .map(|(_, p)| Observer::new(&display, p, EyePosition::default(), &topts, optics, &cache))
             .collect::<Result<_, _>>()?;
         let grid = viewers[0].grid();
         let reference_at = |level: f64| {
@@ -152,6 +154,7 @@ impl PaperSetup {
         let (reference, plain_reference) = (reference_at(OBJECTIVE_LEVEL), reference_at(1.0));
         Ok(Self {
             cache,
+            optics,
             display,
             observers,
             document,
@@ -223,6 +226,7 @@ impl PaperSetup {
             decoy: DecoyKind::Image,
             max_iterations,
             sub_rays: 16,
+            optics: self.optics,
             ..Default::default()
         });
         let t = Instant::now();
@@ -246,6 +250,7 @@ impl PaperSetup {
             population_decoys: 0,
             max_iterations,
             decoy: DecoyKind::Image,
+            optics: self.optics,
             ..Default::default()
         });
         let cancel = AtomicBool::new(false);
@@ -261,6 +266,7 @@ impl PaperSetup {
                 population,
                 key_directions: 0,
                 head_offsets_mm: vec![],
+                optics: self.optics,
                 ..Default::default()
             },
             &self.cache,
@@ -324,10 +330,11 @@ fn create_out(out: &Path) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))
 }
 
-/// Reproduces the paper's §7.3 (Figs. 13–15) on the `paper` preset; writes pictures and `results.md`.
-pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String> {
+/// Reproduces the paper's §7.3 (Figs. 13–15) on the `paper` preset under `optics`; writes pictures and
+/// `results.md`.
+pub fn paper(out: &Path, max_iterations: u32, population: u32, optics: Optics) -> Result<String> {
     create_out(out)?;
-    let setup = PaperSetup::new(out)?;
+    let setup = PaperSetup::new(out, optics)?;
     let mut rows = Vec::new();
     // Fig. 13: the document on a plain 2D display.
     let plain = plain_light_field_for_image(&setup.display, &setup.document);
@@ -344,7 +351,8 @@ pub fn paper(out: &Path, max_iterations: u32, population: u32) -> Result<String>
             timings.push(setup.figure_variant(out, figure, variant, max_iterations, &mut rows)?);
         }
     }
-    let mut md = paper_table(&rows)?;
+    let mut md = format!("Forward model of the encoders and of every viewer: {optics:?} optics.\n\n");
+    md.push_str(&paper_table(&rows)?);
     if population > 0 {
         setup.population_check(out, max_iterations, population, &mut md)?;
     }
