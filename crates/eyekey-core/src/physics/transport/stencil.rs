@@ -105,30 +105,47 @@ impl std::fmt::Debug for StencilOperator {
     }
 }
 
-/// Per tap column c_x of a box whose first column is x0: the output phase and the shift in holes.
-fn phases(x0: i64, width: usize, k: usize) -> Vec<(usize, i64)> {
-    let k = k as i64;
-    (0..width as i64)
-        .map(|cx| {
-            let t = x0 + cx;
-            (t.rem_euclid(k) as usize, t.div_euclid(k))
+/// Lanes of the register blocks: the output is computed 64 holes at a time (four 512-bit registers, so four
+/// independent multiply-add chains per tap).
+const LANES: usize = 64;
+
+/// The taps of one kernel row that land on one output phase: cells c_x = c_0, c_0 + k, … of the row, whose
+/// shifts in holes are s0, s0 + 1, …
+struct Group {
+    phase: usize,
+    s0: i64,
+    /// Cell indices into the view's box, in order of c_x.
+    cells: Vec<usize>,
+}
+
+/// A view's groups, indexed by kernel row.
+fn groups(st: &ViewStencil, k: usize) -> Vec<Vec<Group>> {
+    (0..st.height)
+        .map(|cy| {
+            (0..k)
+                .filter_map(|phase| {
+                    let cxs: Vec<usize> = (0..st.width)
+                        .filter(|cx| (st.x0 + *cx as i64).rem_euclid(k as i64) as usize == phase)
+                        .collect();
+                    let first = *cxs.first()?;
+                    Some(Group {
+                        phase,
+                        s0: (st.x0 + first as i64).div_euclid(k as i64),
+                        cells: cxs.iter().map(|cx| cy * st.width + cx).collect(),
+                    })
+                })
+                .collect()
         })
         .collect()
 }
 
-/// The index range of x ∈ [0, n) with x + s ∈ [0, n).
-fn overlap(n: usize, s: i64) -> std::ops::Range<usize> {
-    let lo = (-s).max(0) as usize;
-    let hi = (n as i64 - s).clamp(0, n as i64) as usize;
-    lo.min(hi)..hi
-}
-
-/// dst[x] += a · src[x] over equal-length slices (the inner loop of both products); with `FMA`, fused
-/// (only where the CPU has it: `mul_add` is a library call otherwise).
+/// r[l] += w·s[l] over one register block; with `FMA`, fused (only where the CPU has it: `mul_add` is a
+/// library call otherwise).
 #[inline(always)]
-fn axpy<const FMA: bool>(dst: &mut [f32], a: f32, src: &[f32]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d = if FMA { a.mul_add(*s, *d) } else { *d + a * s };
+fn madd<const FMA: bool>(r: &mut [f32; LANES], w: f32, s: &[f32]) {
+    let s: &[f32; LANES] = s.try_into().expect("a block of LANES");
+    for (x, v) in r.iter_mut().zip(s) {
+        *x = if FMA { w.mul_add(*v, *x) } else { *x + w * v };
     }
 }
 
@@ -157,17 +174,17 @@ fn simd() -> Simd {
 }
 
 /// The multiply-add peak of the vector code the products dispatch to, on every rayon thread, GFLOP/s (2 FLOPs
-/// per multiply-add): eight independent 16-lane chains of x ← a·x + b that stay in registers, the stencils'
-/// arithmetic without their loads and stores. The roofline `eyekey bench --section wave` measures against.
+/// per multiply-add): 128 independent lanes of x ← a·x + b in eight 512-bit (or sixteen 256-bit) registers, the
+/// FMA units' throughput with no loads or stores. The roofline `eyekey bench --section wave` measures against.
 pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
-    #[inline(always)]
-    fn chains<const FMA: bool>(steps: usize, b: f32) -> f32 {
+    // Baseline: the same 128 lanes as scalar code the compiler may vectorise as it can.
+    fn chains(steps: usize, b: f32) -> f32 {
         let a = std::hint::black_box(0.999_999f32);
         let mut acc = [[1f32; 16]; 8];
         for _ in 0..steps {
             for chain in acc.iter_mut() {
                 for x in chain.iter_mut() {
-                    *x = if FMA { a.mul_add(*x, b) } else { a * *x + b };
+                    *x = a * *x + b;
                 }
             }
         }
@@ -176,12 +193,36 @@ pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,fma")]
     fn chains_avx512(steps: usize, b: f32) -> f32 {
-        chains::<true>(steps, b)
+        use std::arch::x86_64::*;
+        let (va, vb) = (_mm512_set1_ps(std::hint::black_box(0.999_999)), _mm512_set1_ps(b));
+        let mut r = [_mm512_set1_ps(1.0); 8];
+        for _ in 0..steps {
+            for x in r.iter_mut() {
+                *x = _mm512_fmadd_ps(va, *x, vb);
+            }
+        }
+        let mut sum = [0f32; 16];
+        let total = r.iter().fold(_mm512_setzero_ps(), |acc, x| _mm512_add_ps(acc, *x));
+        // SAFETY: `sum` holds 16 f32, what one unaligned store of a 512-bit vector writes.
+        unsafe { _mm512_storeu_ps(sum.as_mut_ptr(), total) };
+        sum.iter().sum()
     }
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn chains_avx2(steps: usize, b: f32) -> f32 {
-        chains::<true>(steps, b)
+        use std::arch::x86_64::*;
+        let (va, vb) = (_mm256_set1_ps(std::hint::black_box(0.999_999)), _mm256_set1_ps(b));
+        let mut r = [_mm256_set1_ps(1.0); 16];
+        for _ in 0..steps {
+            for x in r.iter_mut() {
+                *x = _mm256_fmadd_ps(va, *x, vb);
+            }
+        }
+        let mut sum = [0f32; 8];
+        let total = r.iter().fold(_mm256_setzero_ps(), |acc, x| _mm256_add_ps(acc, *x));
+        // SAFETY: `sum` holds 8 f32, what one unaligned store of a 256-bit vector writes.
+        unsafe { _mm256_storeu_ps(sum.as_mut_ptr(), total) };
+        sum.iter().sum()
     }
     let threads = rayon::current_num_threads();
     let mut best = f64::INFINITY;
@@ -198,7 +239,7 @@ pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: as above.
                     Simd::Avx2 => unsafe { chains_avx2(steps, b) },
-                    _ => chains::<false>(steps, b),
+                    _ => chains(steps, b),
                 }
             })
             .sum();
@@ -217,17 +258,24 @@ pub fn vector_isa() -> &'static str {
     }
 }
 
-/// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the source planes (the
-/// light field's per-view planes for the forward, the coupled image for the adjoint) and the phase tables.
+/// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the tap groups, and the source
+/// rows (the light field's per-view rows for the forward, the coupled image's per-phase rows for the adjoint),
+/// each `row_len` long with its holes at [pad, pad + nx) and zeros around them, so that no block reads past a
+/// row and taps off the grid meet zeros.
 struct Pass<'a> {
     op: &'a StencilOperator,
     term: Option<usize>,
+    groups: &'a [Vec<Vec<Group>>],
     source: &'a [f32],
-    tables: &'a [Vec<(usize, i64)>],
+    row_len: usize,
+    pad: usize,
+    /// nx rounded up to whole blocks.
+    nx_blocks: usize,
 }
 
 impl Pass<'_> {
-    /// Output row `gy` of the forward product into `acc` (phase-major: phase φ's holes at [φ·nx, (φ + 1)·nx)).
+    /// Output row `gy` of the forward product into `acc` (phase-major: phase φ's holes at
+    /// [φ·nx_blocks, φ·nx_blocks + nx)).
     fn forward_row(&self, gy: i64, acc: &mut [f32]) {
         match simd() {
             #[cfg(target_arch = "x86_64")]
@@ -240,7 +288,7 @@ impl Pass<'_> {
         }
     }
 
-    /// Sample row `row` (= v·ny + y) of the adjoint product into `dst` (one value per hole x).
+    /// Sample row `row` (= v·ny + y) of the adjoint product into `dst` (nx_blocks values, one per hole x).
     fn adjoint_row(&self, row: usize, dst: &mut [f32]) {
         match simd() {
             #[cfg(target_arch = "x86_64")]
@@ -277,63 +325,71 @@ impl Pass<'_> {
         self.adjoint_row_with::<true>(row, dst)
     }
 
+    /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group: each block of 16 outputs stays in registers
+    /// while the group's taps are added.
     #[inline(always)]
     fn forward_row_with<const FMA: bool>(&self, gy: i64, acc: &mut [f32]) {
         let op = self.op;
-        let (nx, ny, k) = (op.holes_x, op.holes_y, op.k);
-        let plane_len = nx * ny;
+        let (ny, k, nb) = (op.holes_y, op.k as i64, self.nx_blocks);
         for (v, st) in op.views.iter().enumerate() {
             let values = st.values(self.term);
-            let plane = &self.source[v * plane_len..(v + 1) * plane_len];
-            for cy in 0..st.height {
+            for (cy, row_groups) in self.groups[v].iter().enumerate() {
                 let num = gy - st.y0 - cy as i64;
                 if num < 0 {
                     break;
                 }
-                if num % k as i64 != 0 || num / k as i64 >= ny as i64 {
+                if num % k != 0 || num / k >= ny as i64 {
                     continue;
                 }
-                let y = (num / k as i64) as usize;
-                let src = &plane[y * nx..(y + 1) * nx];
-                let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
-                for (&w, &(phase, s)) in kernel_row.iter().zip(&self.tables[v]) {
-                    let range = overlap(nx, s);
-                    if w == 0.0 || range.is_empty() {
-                        continue;
+                let y = (num / k) as usize;
+                let src = &self.source[(v * ny + y) * self.row_len..(v * ny + y + 1) * self.row_len];
+                for g in row_groups {
+                    let base = (self.pad as i64 - g.s0) as usize;
+                    let dst = &mut acc[g.phase * nb..(g.phase + 1) * nb];
+                    for c in (0..nb).step_by(LANES) {
+                        let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
+                        for (j, &cell) in g.cells.iter().enumerate() {
+                            let w = values[cell];
+                            if w != 0.0 {
+                                let at = base + c - j;
+                                madd::<FMA>(&mut r, w, &src[at..at + LANES]);
+                            }
+                        }
+                        dst[c..c + LANES].copy_from_slice(&r);
                     }
-                    let dst = &mut acc[phase * nx..(phase + 1) * nx];
-                    let (d0, s0) = ((range.start as i64 + s) as usize, range.start);
-                    let len = range.len();
-                    axpy::<FMA>(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
                 }
             }
         }
     }
 
+    /// dst[x] = Σ_groups Σ_j w_j·ỹ_φ(x + s0 + j, g_y), 16 samples at a time in registers.
     #[inline(always)]
     fn adjoint_row_with<const FMA: bool>(&self, row: usize, dst: &mut [f32]) {
         let op = self.op;
-        let (nx, ny, k) = (op.holes_x, op.holes_y, op.k);
-        let width = nx * k;
+        let (ny, k, nb) = (op.holes_y, op.k, self.nx_blocks);
         let (v, yy) = (row / ny, row % ny);
         let st = &op.views[v];
         let values = st.values(self.term);
-        for cy in 0..st.height {
+        for (cy, row_groups) in self.groups[v].iter().enumerate() {
             let gy = (yy * k) as i64 + st.y0 + cy as i64;
             if gy < 0 || gy >= (ny * k) as i64 {
                 continue;
             }
-            let src_row = &self.source[gy as usize * width..(gy as usize + 1) * width];
-            let kernel_row = &values[cy * st.width..(cy + 1) * st.width];
-            for (&w, &(phase, s)) in kernel_row.iter().zip(&self.tables[v]) {
-                let range = overlap(nx, s);
-                if w == 0.0 || range.is_empty() {
-                    continue;
+            for g in row_groups {
+                let at_row = (gy as usize * k + g.phase) * self.row_len;
+                let src = &self.source[at_row..at_row + self.row_len];
+                let base = (self.pad as i64 + g.s0) as usize;
+                for c in (0..nb).step_by(LANES) {
+                    let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
+                    for (j, &cell) in g.cells.iter().enumerate() {
+                        let w = values[cell];
+                        if w != 0.0 {
+                            let at = base + c + j;
+                            madd::<FMA>(&mut r, w, &src[at..at + LANES]);
+                        }
+                    }
+                    dst[c..c + LANES].copy_from_slice(&r);
                 }
-                let src = &src_row[phase * nx..(phase + 1) * nx];
-                let (s0, d0) = ((range.start as i64 + s) as usize, range.start);
-                let len = range.len();
-                axpy::<FMA>(&mut dst[d0..d0 + len], w, &src[s0..s0 + len]);
             }
         }
     }
@@ -453,21 +509,17 @@ impl StencilOperator {
         out
     }
 
-    /// Band `band` of the N-band light field `l` as one plane per view, `[v][y][x]`.
-    fn planes(&self, l: &[f32], n_bands: usize, band: usize) -> Vec<f32> {
-        let (nx, ny, nu) = (self.holes_x, self.holes_y, self.views_u);
-        let frame_w = nx * nu;
-        let mut planes = vec![0f32; self.n_views() * ny * nx];
-        planes.par_chunks_mut(ny * nx).enumerate().for_each(|(v, plane)| {
-            let (i, j) = (v % nu, v / nu);
-            for y in 0..ny {
-                let row = (y * self.views_v + j) * frame_w;
-                for (x, slot) in plane[y * nx..(y + 1) * nx].iter_mut().enumerate() {
-                    *slot = l[(row + x * nu + i) * n_bands + band];
-                }
-            }
-        });
-        planes
+    /// The tap groups of every view and the padding their shifts need (holes each side of a source row).
+    fn layout(&self) -> (Vec<Vec<Vec<Group>>>, usize) {
+        let groups: Vec<Vec<Vec<Group>>> = self.views.iter().map(|v| groups(v, self.k)).collect();
+        let reach = groups
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|g| g.s0.unsigned_abs() as usize + g.cells.len())
+            .max()
+            .unwrap_or(0);
+        (groups, reach)
     }
 
     /// out[r·3 + a] (+)= c[a]·(T L_band)_r, or with `term` ∂T/∂W_term instead of T.
@@ -484,28 +536,42 @@ impl StencilOperator {
     ) {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
-        let planes = self.planes(l, n_bands, band);
-        let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
-        let width = nx * k;
-        let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
+        let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
+        let (groups, pad) = self.layout();
+        let nx_blocks = nx.div_ceil(LANES) * LANES;
+        let row_len = 2 * pad + nx_blocks;
+        // Band `band` of the light field as one padded row per (view, y).
+        let mut source = vec![0f32; self.n_views() * ny * row_len];
+        let frame_w = nx * nu;
+        source.par_chunks_mut(row_len).enumerate().for_each(|(r, row)| {
+            let (v, y) = (r / ny, r % ny);
+            let (i, j) = (v % nu, v / nu);
+            let frame_row = (y * self.views_v + j) * frame_w;
+            for (x, slot) in row[pad..pad + nx].iter_mut().enumerate() {
+                *slot = l[(frame_row + x * nu + i) * n_bands + band];
+            }
+        });
         let pass = Pass {
             op: self,
             term,
-            source: &planes,
-            tables: &tables,
+            groups: &groups,
+            source: &source,
+            row_len,
+            pad,
+            nx_blocks,
         };
+        let width = nx * k;
         let rows_per_task = (ny * k / (4 * rayon::current_num_threads().max(1))).max(1);
         out.par_chunks_mut(rows_per_task * width * 3)
             .enumerate()
             .for_each(|(chunk, rows)| {
-                // The row being summed, phase-major: phase φ's holes at [φ·nx, (φ + 1)·nx).
-                let mut acc = vec![0f32; k * nx];
+                let mut acc = vec![0f32; k * nx_blocks];
                 for (r, out_row) in rows.chunks_exact_mut(width * 3).enumerate() {
                     let gy = (chunk * rows_per_task + r) as i64;
                     acc.iter_mut().for_each(|a| *a = 0.0);
                     pass.forward_row(gy, &mut acc);
                     for (g, o) in out_row.chunks_exact_mut(3).enumerate() {
-                        let value = acc[(g % k) * nx + g / k];
+                        let value = acc[(g % k) * nx_blocks + g / k];
                         for (slot, ca) in o.iter_mut().zip(c) {
                             *slot = if accumulate { *slot + ca * value } else { ca * value };
                         }
@@ -528,30 +594,33 @@ impl StencilOperator {
     ) {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
-        let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
+        let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
+        let (groups, pad) = self.layout();
+        let nx_blocks = nx.div_ceil(LANES) * LANES;
+        let row_len = 2 * pad + nx_blocks;
         let width = nx * k;
-        // ỹ = Σ_a c_a y_a, each row phase-major like the forward's accumulator.
-        let mut coupled = vec![0f32; ny * k * width];
-        coupled.par_chunks_mut(width).enumerate().for_each(|(gy, row)| {
+        // ỹ = Σ_a c_a y_a as one padded row per (retinal row, phase).
+        let mut source = vec![0f32; ny * k * k * row_len];
+        source.par_chunks_mut(k * row_len).enumerate().for_each(|(gy, rows)| {
             for g in 0..width {
                 let px = &y[(gy * width + g) * 3..(gy * width + g) * 3 + 3];
-                row[(g % k) * nx + g / k] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+                rows[(g % k) * row_len + pad + g / k] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
             }
         });
-        let plane_len = nx * ny;
-        let tables: Vec<Vec<(usize, i64)>> = self.views.iter().map(|v| phases(v.x0, v.width, k)).collect();
-        let mut planes = vec![0f32; self.n_views() * plane_len];
         let pass = Pass {
             op: self,
             term,
-            source: &coupled,
-            tables: &tables,
+            groups: &groups,
+            source: &source,
+            row_len,
+            pad,
+            nx_blocks,
         };
+        let mut planes = vec![0f32; self.n_views() * ny * nx_blocks];
         planes
-            .par_chunks_mut(nx)
+            .par_chunks_mut(nx_blocks)
             .enumerate()
             .for_each(|(row, dst)| pass.adjoint_row(row, dst));
-        let nu = self.views_u;
         let frame_w = nx * nu;
         out.par_chunks_mut(frame_w * n_bands)
             .enumerate()
@@ -559,7 +628,7 @@ impl StencilOperator {
                 let (yy, j) = (row / self.views_v, row % self.views_v);
                 for col in 0..frame_w {
                     let (x, i) = (col / nu, col % nu);
-                    dst[col * n_bands + band] = planes[(j * nu + i) * plane_len + yy * nx + x];
+                    dst[col * n_bands + band] = planes[((j * nu + i) * ny + yy) * nx_blocks + x];
                 }
             });
     }
@@ -570,15 +639,16 @@ mod tests {
     use super::*;
     use crate::physics::transport::rng::SplitMix64;
 
-    /// A small display with 5×4 holes and 3×2 views (geometry otherwise the paper's; only the counts matter).
-    fn display() -> DisplayGeometry {
-        DisplayGeometry {
-            holes_x: 5,
-            holes_y: 4,
+    /// Small displays with 3×2 views (geometry otherwise the paper's; only the counts matter): 5×4 holes (rows
+    /// shorter than one register block) and 70×3 (rows of two blocks, the second part-filled).
+    fn displays() -> [DisplayGeometry; 2] {
+        [(5, 4), (70, 3)].map(|(holes_x, holes_y)| DisplayGeometry {
+            holes_x,
+            holes_y,
             views_u: 3,
             views_v: 2,
             ..DisplayGeometry::paper()
-        }
+        })
     }
 
     /// Random kernels: boxes that start left of, at and right of the hole origin and reach past the grid,
@@ -639,10 +709,12 @@ mod tests {
 
     #[test]
     fn the_stencil_products_equal_the_written_out_matrix_and_its_transpose() {
-        let d = display();
         let n_bands = 3;
         let c = [0.7f32, -0.2, 0.4];
-        for k in 1..=3 {
+        for (d, k) in displays()
+            .into_iter()
+            .flat_map(|d| (1..=3).map(move |k| (d.clone(), k)))
+        {
             let op = operator(&d, k, 11 + k as u64);
             for term in [None, Some(0)] {
                 let t = dense(&op, &d, term);
