@@ -313,8 +313,8 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
     let mut out = format!(
         "Roofline: {peak:.1} GFLOP/s, the multiply-add peak of the stencils' own vector code ({}) on {} \
          threads (`multiply_add_peak_gflops`: register-resident chains, no loads or stores). The kernels take \
-         a few hundred KiB and a light field a few MiB, so the products run from cache and are compute-bound: \
-         FLOPs (2 per multiply-add) are the measure. \"Geometric\" is the same display's traced CSR operator \
+         a few hundred KiB and a light field a few MiB, so the products run from cache; the roofline is the FMA \
+         units' throughput and FLOPs (2 per multiply-add) are the measure. \"Geometric\" is the same display's traced CSR operator \
          and fused kernels (one T for every band), built and timed in the same run.\n\n",
         eyekey_core::physics::transport::vector_isa(),
         rayon::current_num_threads()
