@@ -105,7 +105,7 @@ impl std::fmt::Debug for StencilOperator {
     }
 }
 
-/// Lanes of the register blocks: the output is computed 64 holes at a time (four 512-bit registers, so four
+/// Lanes of the register blocks: the output is computed 64 holes at a time (eight 256-bit registers, so eight
 /// independent multiply-add chains per tap).
 const LANES: usize = 64;
 
@@ -152,7 +152,6 @@ fn madd<const FMA: bool>(r: &mut [f32; LANES], w: f32, s: &[f32]) {
 /// The vector instructions the products are compiled for, chosen once at run time.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Simd {
-    Avx512,
     Avx2,
     Baseline,
 }
@@ -162,9 +161,6 @@ fn simd() -> Simd {
     *SIMD.get_or_init(|| {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma") {
-                return Simd::Avx512;
-            }
             if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
                 return Simd::Avx2;
             }
@@ -174,8 +170,8 @@ fn simd() -> Simd {
 }
 
 /// The multiply-add peak of the vector code the products dispatch to, on every rayon thread, GFLOP/s (2 FLOPs
-/// per multiply-add): 128 independent lanes of x ← a·x + b in eight 512-bit (or sixteen 256-bit) registers, the
-/// FMA units' throughput with no loads or stores. The roofline `eyekey bench --section wave` measures against.
+/// per multiply-add): 128 independent lanes of x ← a·x + b in sixteen 256-bit registers, the FMA units'
+/// throughput with no loads or stores. The roofline `eyekey bench --section wave` measures against.
 pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
     // Baseline: the same 128 lanes as scalar code the compiler may vectorise as it can.
     fn chains(steps: usize, b: f32) -> f32 {
@@ -189,23 +185,6 @@ pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
             }
         }
         acc.iter().flatten().sum()
-    }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    fn chains_avx512(steps: usize, b: f32) -> f32 {
-        use std::arch::x86_64::*;
-        let (va, vb) = (_mm512_set1_ps(std::hint::black_box(0.999_999)), _mm512_set1_ps(b));
-        let mut r = [_mm512_set1_ps(1.0); 8];
-        for _ in 0..steps {
-            for x in r.iter_mut() {
-                *x = _mm512_fmadd_ps(va, *x, vb);
-            }
-        }
-        let mut sum = [0f32; 16];
-        let total = r.iter().fold(_mm512_setzero_ps(), |acc, x| _mm512_add_ps(acc, *x));
-        // SAFETY: `sum` holds 16 f32, what one unaligned store of a 512-bit vector writes.
-        unsafe { _mm512_storeu_ps(sum.as_mut_ptr(), total) };
-        sum.iter().sum()
     }
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
@@ -235,9 +214,6 @@ pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
                 match simd() {
                     #[cfg(target_arch = "x86_64")]
                     // SAFETY: `simd()` found the features the called function is compiled for.
-                    Simd::Avx512 => unsafe { chains_avx512(steps, b) },
-                    #[cfg(target_arch = "x86_64")]
-                    // SAFETY: as above.
                     Simd::Avx2 => unsafe { chains_avx2(steps, b) },
                     _ => chains(steps, b),
                 }
@@ -249,10 +225,9 @@ pub fn multiply_add_peak_gflops(steps: usize) -> f64 {
     (threads * steps * 128 * 2) as f64 / best / 1e9
 }
 
-/// The instruction set the products use: "avx512f+fma", "avx2+fma" or "baseline".
+/// The instruction set the products use: "avx2+fma" or "baseline".
 pub fn vector_isa() -> &'static str {
     match simd() {
-        Simd::Avx512 => "avx512f+fma",
         Simd::Avx2 => "avx2+fma",
         Simd::Baseline => "baseline",
     }
@@ -280,9 +255,6 @@ impl Pass<'_> {
         match simd() {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
-            Simd::Avx512 => unsafe { self.forward_row_avx512(gy, acc) },
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: as above.
             Simd::Avx2 => unsafe { self.forward_row_avx2(gy, acc) },
             _ => self.forward_row_with::<false>(gy, acc),
         }
@@ -293,18 +265,9 @@ impl Pass<'_> {
         match simd() {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
-            Simd::Avx512 => unsafe { self.adjoint_row_avx512(row, dst) },
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: as above.
             Simd::Avx2 => unsafe { self.adjoint_row_avx2(row, dst) },
             _ => self.adjoint_row_with::<false>(row, dst),
         }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    fn forward_row_avx512(&self, gy: i64, acc: &mut [f32]) {
-        self.forward_row_with::<true>(gy, acc)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -314,18 +277,12 @@ impl Pass<'_> {
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    fn adjoint_row_avx512(&self, row: usize, dst: &mut [f32]) {
-        self.adjoint_row_with::<true>(row, dst)
-    }
-
-    #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn adjoint_row_avx2(&self, row: usize, dst: &mut [f32]) {
         self.adjoint_row_with::<true>(row, dst)
     }
 
-    /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group: each block of 16 outputs stays in registers
+    /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group: each block of 64 outputs stays in registers
     /// while the group's taps are added.
     #[inline(always)]
     fn forward_row_with<const FMA: bool>(&self, gy: i64, acc: &mut [f32]) {
@@ -362,7 +319,7 @@ impl Pass<'_> {
         }
     }
 
-    /// dst[x] = Σ_groups Σ_j w_j·ỹ_φ(x + s0 + j, g_y), 16 samples at a time in registers.
+    /// dst[x] = Σ_groups Σ_j w_j·ỹ_φ(x + s0 + j, g_y), 64 samples at a time in registers.
     #[inline(always)]
     fn adjoint_row_with<const FMA: bool>(&self, row: usize, dst: &mut [f32]) {
         let op = self.op;
