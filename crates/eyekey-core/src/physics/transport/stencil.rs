@@ -235,17 +235,22 @@ pub fn vector_isa() -> &'static str {
 
 /// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the tap groups, and the source
 /// rows (the light field's per-view rows for the forward, the coupled image's per-phase rows for the adjoint),
-/// each `row_len` long with its holes at [pad, pad + nx) and zeros around them, so that no block reads past a
-/// row and taps off the grid meet zeros.
+/// each `layout.row_len` long with its holes at [pad, pad + nx) and zeros around them, so that no block reads
+/// past a row and taps off the grid meet zeros.
 struct Pass<'a> {
     op: &'a StencilOperator,
     term: Option<usize>,
-    groups: &'a [Vec<Vec<Group>>],
+    layout: &'a Layout,
     source: &'a [f32],
-    row_len: usize,
+}
+
+/// How a product lays out its rows: the tap groups (per view, per kernel row), the zeros each side of a source
+/// row, the output row rounded up to whole register blocks, and a source row's length.
+struct Layout {
+    groups: Vec<Vec<Vec<Group>>>,
     pad: usize,
-    /// nx rounded up to whole blocks.
     nx_blocks: usize,
+    row_len: usize,
 }
 
 impl Pass<'_> {
@@ -287,10 +292,12 @@ impl Pass<'_> {
     #[inline(always)]
     fn forward_row_with<const FMA: bool>(&self, gy: i64, acc: &mut [f32]) {
         let op = self.op;
-        let (ny, k, nb) = (op.holes_y, op.k as i64, self.nx_blocks);
+        let groups = &self.layout.groups;
+        let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
+        let (ny, k) = (op.holes_y, op.k as i64);
         for (v, st) in op.views.iter().enumerate() {
             let values = st.values(self.term);
-            for (cy, row_groups) in self.groups[v].iter().enumerate() {
+            for (cy, row_groups) in groups[v].iter().enumerate() {
                 let num = gy - st.y0 - cy as i64;
                 if num < 0 {
                     break;
@@ -299,9 +306,9 @@ impl Pass<'_> {
                     continue;
                 }
                 let y = (num / k) as usize;
-                let src = &self.source[(v * ny + y) * self.row_len..(v * ny + y + 1) * self.row_len];
+                let src = &self.source[(v * ny + y) * row_len..(v * ny + y + 1) * row_len];
                 for g in row_groups {
-                    let base = (self.pad as i64 - g.s0) as usize;
+                    let base = (pad as i64 - g.s0) as usize;
                     let dst = &mut acc[g.phase * nb..(g.phase + 1) * nb];
                     for c in (0..nb).step_by(LANES) {
                         let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
@@ -323,19 +330,21 @@ impl Pass<'_> {
     #[inline(always)]
     fn adjoint_row_with<const FMA: bool>(&self, row: usize, dst: &mut [f32]) {
         let op = self.op;
-        let (ny, k, nb) = (op.holes_y, op.k, self.nx_blocks);
+        let groups = &self.layout.groups;
+        let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
+        let (ny, k) = (op.holes_y, op.k);
         let (v, yy) = (row / ny, row % ny);
         let st = &op.views[v];
         let values = st.values(self.term);
-        for (cy, row_groups) in self.groups[v].iter().enumerate() {
+        for (cy, row_groups) in groups[v].iter().enumerate() {
             let gy = (yy * k) as i64 + st.y0 + cy as i64;
             if gy < 0 || gy >= (ny * k) as i64 {
                 continue;
             }
             for g in row_groups {
-                let at_row = (gy as usize * k + g.phase) * self.row_len;
-                let src = &self.source[at_row..at_row + self.row_len];
-                let base = (self.pad as i64 + g.s0) as usize;
+                let at_row = (gy as usize * k + g.phase) * row_len;
+                let src = &self.source[at_row..at_row + row_len];
+                let base = (pad as i64 + g.s0) as usize;
                 for c in (0..nb).step_by(LANES) {
                     let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
                     for (j, &cell) in g.cells.iter().enumerate() {
@@ -466,17 +475,24 @@ impl StencilOperator {
         out
     }
 
-    /// The tap groups of every view and the padding their shifts need (holes each side of a source row).
-    fn layout(&self) -> (Vec<Vec<Vec<Group>>>, usize) {
+    /// The tap groups of every view, the padding their shifts need (holes each side of a source row), and the
+    /// row lengths that follow.
+    fn layout(&self) -> Layout {
         let groups: Vec<Vec<Vec<Group>>> = self.views.iter().map(|v| groups(v, self.k)).collect();
-        let reach = groups
+        let pad = groups
             .iter()
             .flatten()
             .flatten()
             .map(|g| g.s0.unsigned_abs() as usize + g.cells.len())
             .max()
             .unwrap_or(0);
-        (groups, reach)
+        let nx_blocks = self.holes_x.div_ceil(LANES) * LANES;
+        Layout {
+            groups,
+            pad,
+            nx_blocks,
+            row_len: 2 * pad + nx_blocks,
+        }
     }
 
     /// out[r·3 + a] (+)= c[a]·(T L_band)_r, or with `term` ∂T/∂W_term instead of T.
@@ -494,9 +510,8 @@ impl StencilOperator {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
-        let (groups, pad) = self.layout();
-        let nx_blocks = nx.div_ceil(LANES) * LANES;
-        let row_len = 2 * pad + nx_blocks;
+        let layout = self.layout();
+        let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
         // Band `band` of the light field as one padded row per (view, y).
         let mut source = vec![0f32; self.n_views() * ny * row_len];
         let frame_w = nx * nu;
@@ -511,11 +526,8 @@ impl StencilOperator {
         let pass = Pass {
             op: self,
             term,
-            groups: &groups,
+            layout: &layout,
             source: &source,
-            row_len,
-            pad,
-            nx_blocks,
         };
         let width = nx * k;
         let rows_per_task = (ny * k / (4 * rayon::current_num_threads().max(1))).max(1);
@@ -552,9 +564,8 @@ impl StencilOperator {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
-        let (groups, pad) = self.layout();
-        let nx_blocks = nx.div_ceil(LANES) * LANES;
-        let row_len = 2 * pad + nx_blocks;
+        let layout = self.layout();
+        let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
         let width = nx * k;
         // ỹ = Σ_a c_a y_a as one padded row per (retinal row, phase).
         let mut source = vec![0f32; ny * k * k * row_len];
@@ -567,11 +578,8 @@ impl StencilOperator {
         let pass = Pass {
             op: self,
             term,
-            groups: &groups,
+            layout: &layout,
             source: &source,
-            row_len,
-            pad,
-            nx_blocks,
         };
         let mut planes = vec![0f32; self.n_views() * ny * nx_blocks];
         planes
