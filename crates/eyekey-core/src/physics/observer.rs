@@ -259,13 +259,12 @@ pub fn transports(
                     }
                     let parts: Vec<(ZernikeCoefficients, TransportOptions)> =
                         lambdas.iter().map(|&l| (lens.at(l), part_options(l))).collect();
-                    let key = serde_json::json!({
-                        "band": lambdas, "display": display, "eye": eye,
-                        "parts": parts.iter().map(|(w, o)| serde_json::json!({
-                            "wavefront": w, "sub_rays": o.sub_rays, "seed": o.seed,
-                            "oversample": o.retina_oversample, "terms": o.derivative_terms, "wave": o.wave,
-                        })).collect::<Vec<_>>(),
-                    })
+                    let key = serde_json::Value::Array(
+                        parts
+                            .iter()
+                            .map(|(w, o)| TransportCache::key(display, w, eye, o))
+                            .collect(),
+                    )
                     .to_string();
                     cache.get_or_insert_with(key, || {
                         let built = parts

@@ -71,13 +71,22 @@ impl TransportCache {
         eye: EyePosition,
         options: &TransportOptions,
     ) -> Result<std::sync::Arc<TransportMatrix>, TransportError> {
-        let key = serde_json::json!({
+        let key = Self::key(display, wavefront, eye, options).to_string();
+        self.get_or_insert_with(key, || TransportMatrix::build(display, wavefront, eye, options))
+    }
+
+    /// Everything that determines one build's operator, as a cache key.
+    pub fn key(
+        display: &DisplayGeometry,
+        wavefront: &ZernikeCoefficients,
+        eye: EyePosition,
+        options: &TransportOptions,
+    ) -> serde_json::Value {
+        serde_json::json!({
             "display": display, "wavefront": wavefront, "eye": eye,
             "sub_rays": options.sub_rays, "seed": options.seed,
             "oversample": options.retina_oversample, "terms": options.derivative_terms, "wave": options.wave,
         })
-        .to_string();
-        self.get_or_insert_with(key, || TransportMatrix::build(display, wavefront, eye, options))
     }
 
     /// The operator cached under `key`, or `build`'s (built outside the lock, then cached): for operators

@@ -86,6 +86,8 @@ pub struct StencilOperator {
     k: usize,
     /// Per view, index j·U + i.
     views: Vec<ViewStencil>,
+    /// How the products lay out their rows, derived from the kernels once.
+    layout: Layout,
 }
 
 impl std::fmt::Debug for StencilOperator {
@@ -111,6 +113,7 @@ const LANES: usize = 64;
 
 /// The taps of one kernel row that land on one output phase: cells c_x = c_0, c_0 + k, … of the row, whose
 /// shifts in holes are s0, s0 + 1, …
+#[derive(Clone, Debug, PartialEq)]
 struct Group {
     phase: usize,
     s0: i64,
@@ -244,8 +247,31 @@ struct Pass<'a> {
     source: &'a [f32],
 }
 
+impl Layout {
+    /// The tap groups of every view, the padding their shifts need (holes each side of a source row), and the
+    /// row lengths that follow, for rows of `holes_x` holes and `k` retinal pixels per hole.
+    fn of(views: &[ViewStencil], k: usize, holes_x: usize) -> Self {
+        let groups: Vec<Vec<Vec<Group>>> = views.iter().map(|v| groups(v, k)).collect();
+        let pad = groups
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|g| g.s0.unsigned_abs() as usize + g.cells.len())
+            .max()
+            .unwrap_or(0);
+        let nx_blocks = holes_x.div_ceil(LANES) * LANES;
+        Self {
+            groups,
+            pad,
+            nx_blocks,
+            row_len: 2 * pad + nx_blocks,
+        }
+    }
+}
+
 /// How a product lays out its rows: the tap groups (per view, per kernel row), the zeros each side of a source
 /// row, the output row rounded up to whole register blocks, and a source row's length.
+#[derive(Clone, Debug, PartialEq)]
 struct Layout {
     groups: Vec<Vec<Vec<Group>>>,
     pad: usize,
@@ -368,13 +394,16 @@ impl StencilOperator {
             (display.views_u * display.views_v) as usize,
             "one stencil per view"
         );
+        let (k, holes_x) = (k.max(1) as usize, display.holes_x as usize);
+        let layout = Layout::of(&views, k, holes_x);
         Self {
-            holes_x: display.holes_x as usize,
+            holes_x,
             holes_y: display.holes_y as usize,
             views_u: display.views_u as usize,
             views_v: display.views_v as usize,
-            k: k.max(1) as usize,
+            k,
             views,
+            layout,
         }
     }
 
@@ -382,7 +411,7 @@ impl StencilOperator {
     /// parts' wavelengths with power fractions w_q. All parts must share the display and the terms.
     pub(crate) fn mix(parts: &[(f64, &StencilOperator)]) -> Self {
         let first = parts[0].1;
-        let views = (0..first.views.len())
+        let views: Vec<ViewStencil> = (0..first.views.len())
             .map(|v| {
                 let n_terms = first.views[v].derivatives.len();
                 let mut taps: Vec<(i64, i64, f32, Vec<f32>)> = Vec::new();
@@ -407,7 +436,11 @@ impl StencilOperator {
                 ViewStencil::from_taps(&refs, n_terms)
             })
             .collect();
-        Self { views, ..first.clone() }
+        Self {
+            layout: Layout::of(&views, first.k, first.holes_x),
+            views,
+            ..first.clone()
+        }
     }
 
     /// Light-field samples per band.
@@ -475,26 +508,6 @@ impl StencilOperator {
         out
     }
 
-    /// The tap groups of every view, the padding their shifts need (holes each side of a source row), and the
-    /// row lengths that follow.
-    fn layout(&self) -> Layout {
-        let groups: Vec<Vec<Vec<Group>>> = self.views.iter().map(|v| groups(v, self.k)).collect();
-        let pad = groups
-            .iter()
-            .flatten()
-            .flatten()
-            .map(|g| g.s0.unsigned_abs() as usize + g.cells.len())
-            .max()
-            .unwrap_or(0);
-        let nx_blocks = self.holes_x.div_ceil(LANES) * LANES;
-        Layout {
-            groups,
-            pad,
-            nx_blocks,
-            row_len: 2 * pad + nx_blocks,
-        }
-    }
-
     /// out[r·3 + a] (+)= c[a]·(T L_band)_r, or with `term` ∂T/∂W_term instead of T.
     #[allow(clippy::too_many_arguments)]
     pub fn forward_band(
@@ -510,7 +523,7 @@ impl StencilOperator {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
-        let layout = self.layout();
+        let layout = &self.layout;
         let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
         // Band `band` of the light field as one padded row per (view, y).
         let mut source = vec![0f32; self.n_views() * ny * row_len];
@@ -526,7 +539,7 @@ impl StencilOperator {
         let pass = Pass {
             op: self,
             term,
-            layout: &layout,
+            layout,
             source: &source,
         };
         let width = nx * k;
@@ -564,7 +577,7 @@ impl StencilOperator {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
-        let layout = self.layout();
+        let layout = &self.layout;
         let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
         let width = nx * k;
         // ỹ = Σ_a c_a y_a as one padded row per (retinal row, phase).
@@ -578,7 +591,7 @@ impl StencilOperator {
         let pass = Pass {
             op: self,
             term,
-            layout: &layout,
+            layout,
             source: &source,
         };
         let mut planes = vec![0f32; self.n_views() * ny * nx_blocks];
