@@ -85,9 +85,13 @@ pub enum ExperimentCommand {
     },
     /// Design-space sweep: target legibility against the fraction of a sampled population that can read.
     Sweep {
-        /// Output directory.
-        #[arg(long, default_value = "docs/experiments/sweep")]
-        out: PathBuf,
+        /// Output directory [default: docs/experiments/sweep-wave, or docs/experiments/sweep under geometric].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Forward model and configurations: wave (lenslet and pinhole displays that resolve their views) or
+        /// geometric (the configurations the `secure` preset was chosen from).
+        #[arg(long, value_enum, default_value = "wave")]
+        optics: Optics,
         /// People sampled per configuration.
         #[arg(long, default_value_t = 60)]
         population: u32,
@@ -411,12 +415,17 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Command::Experiment(ExperimentCommand::Sweep {
             out,
+            optics,
             population,
             max_iterations,
         }) => {
+            let out = out.unwrap_or_else(|| match optics {
+                Optics::Wave => PathBuf::from("docs/experiments/sweep-wave"),
+                Optics::Geometric => PathBuf::from("docs/experiments/sweep"),
+            });
             print!(
                 "{}",
-                crate::research::experiment::sweep(&out, population, max_iterations)?.0
+                crate::research::experiment::sweep(&out, population, max_iterations, optics)?.0
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {

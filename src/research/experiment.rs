@@ -368,6 +368,10 @@ pub struct SweepPoint {
     /// What was varied.
     pub label: String,
     pub display: DisplayGeometry,
+    /// Forward model of the encoder and of every viewer.
+    pub optics: Optics,
+    /// The display's smallest resolvability M = A·s/(λd) over its bands (views resolved while ≥ 1).
+    pub resolvability: f64,
     /// Viewing pupil of the target, mm.
     pub pupil_mm: f64,
     /// Decoy observers K − 1.
@@ -411,6 +415,52 @@ fn sweep_display(views: u32, pitch_mm: f64, distance_mm: f64, holes: u32, bands:
     }
 }
 
+/// A lenslet display for the wave sweep: `holes`² square lenslets of side and aperture `pitch_mm`, `views`² views `spacing_mm` apart at `distance_mm`; the focal length follows,
+/// f = p_s·d/s with p_s = pitch/views.
+fn sweep_lenslet(holes: u32, pitch_mm: f64, views: u32, spacing_mm: f64, distance_mm: f64) -> DisplayGeometry {
+    let p_s = pitch_mm / views as f64;
+    DisplayGeometry {
+        aperture: eyekey_core::physics::display::Aperture::Lenslet,
+        holes_x: holes,
+        holes_y: holes,
+        hole_pitch_mm: pitch_mm,
+        hole_diameter_mm: pitch_mm,
+        views_u: views,
+        views_v: views,
+        screen_pixel_pitch_mm: p_s,
+        gap_mm: p_s * distance_mm / spacing_mm,
+        viewing_distance_mm: distance_mm,
+        projectors: eyekey_core::physics::spectral::paper_projectors(),
+        l_max: 1.0,
+    }
+}
+
+/// A pinhole barrier for the wave sweep: `holes`² holes of `hole_mm` at `pitch_mm`, `views`² screen pixels of
+/// pitch/views behind each, `gap_mm` deep, viewed from `distance_mm`.
+fn sweep_pinhole(
+    holes: u32,
+    pitch_mm: f64,
+    hole_mm: f64,
+    views: u32,
+    gap_mm: f64,
+    distance_mm: f64,
+) -> DisplayGeometry {
+    DisplayGeometry {
+        aperture: eyekey_core::physics::display::Aperture::Pinhole,
+        holes_x: holes,
+        holes_y: holes,
+        hole_pitch_mm: pitch_mm,
+        hole_diameter_mm: hole_mm,
+        views_u: views,
+        views_v: views,
+        screen_pixel_pitch_mm: pitch_mm / views as f64,
+        gap_mm,
+        viewing_distance_mm: distance_mm,
+        projectors: eyekey_core::physics::spectral::paper_projectors(),
+        l_max: 1.0,
+    }
+}
+
 /// One configuration of the design-space sweep: what differs from the baseline.
 struct SweepConfig {
     label: String,
@@ -422,6 +472,7 @@ struct SweepConfig {
     decoy: DecoyKind,
     decoy_weight: f64,
     adaptive_rounds: u32,
+    optics: Optics,
 }
 
 impl SweepConfig {
@@ -435,6 +486,25 @@ impl SweepConfig {
             decoy: DecoyKind::Noise,
             decoy_weight: 0.3,
             adaptive_rounds: 0,
+            optics: Optics::Geometric,
+        }
+    }
+
+    /// The wave sweep's baseline: a 32×32 lenslet display of 1 mm lenslets, 9×9 views 0.6 mm apart at 500 mm
+    /// (the `lenslet` preset on a smaller array), 6 mm pupil, 6 noise decoys at weight 0.3.
+    fn wave_base(label: &str) -> Self {
+        Self {
+            display: sweep_lenslet(32, 1.0, 9, 0.6, 500.0),
+            optics: Optics::Wave,
+            ..Self::base(label)
+        }
+    }
+
+    /// The wave baseline on another display.
+    fn wave_on(label: &str, display: DisplayGeometry) -> Self {
+        Self {
+            display,
+            ..Self::wave_base(label)
         }
     }
 
@@ -520,6 +590,77 @@ fn sweep_configs() -> Vec<SweepConfig> {
     configs
 }
 
+/// The wave-optics sweep: the lenslet baseline, then one axis at a time (aperture kind, pitch, aperture, gap,
+/// views, viewing distance, pupil, decoys), and the geometric sweep's diffraction-limited baseline for contrast.
+fn wave_sweep_configs() -> Vec<SweepConfig> {
+    let l = |pitch: f64, views: u32, spacing: f64, distance: f64| sweep_lenslet(32, pitch, views, spacing, distance);
+    let mut configs = vec![SweepConfig::wave_base(
+        "baseline: lenslet 1 mm, 9×9 views 0.6 mm apart (f 92.6 mm), 500 mm, 6 noise decoys w=0.3",
+    )];
+    // Aperture kind: the `pinhole` preset's barrier, a pinhole barrier as dense in angle as the lenslets, and the
+    // geometric sweep's baseline (43 µm holes), all on 32×32 apertures.
+    configs.push(SweepConfig::wave_on(
+        "pinhole barrier: 0.15 mm holes at 0.75 mm, 5×5 views 2.5 mm apart (gap 30 mm)",
+        sweep_pinhole(32, 0.75, 0.15, 5, 30.0, 500.0),
+    ));
+    configs.push(SweepConfig::wave_on(
+        "pinhole barrier: 0.11 mm holes at 1 mm, 9×9 views 0.6 mm apart (gap 92.6 mm)",
+        sweep_pinhole(32, 1.0, 1.0 / 9.0, 9, 92.6, 500.0),
+    ));
+    configs.push(SweepConfig::wave_on(
+        "geometric sweep's baseline: 43 µm holes at 0.3 mm, 7×7 views 0.94 mm apart",
+        sweep_display(7, 0.3, 500.0, 32, 4),
+    ));
+    // Pitch (aperture = pitch), at the same views and view spacing.
+    for pitch in [0.7, 1.4] {
+        configs.push(SweepConfig::wave_on(
+            &format!("lenslet pitch {pitch} mm"),
+            l(pitch, 9, 0.6, 500.0),
+        ));
+    }
+    // Aperture: a lenslet's aperture is its cell (its views must fit behind it), so the aperture is varied on
+    // the pinhole barrier: smaller holes diffract more, larger ones blur neighbouring screen pixels together.
+    for hole in [0.1, 0.25] {
+        configs.push(SweepConfig::wave_on(
+            &format!("pinhole barrier, holes {hole} mm"),
+            sweep_pinhole(32, 0.75, hole, 5, 30.0, 500.0),
+        ));
+    }
+    // Gap (focal length), which sets the view spacing at the pupil.
+    for spacing in [0.4, 0.9] {
+        let f = 1.0 / 9.0 * 500.0 / spacing;
+        configs.push(SweepConfig::wave_on(
+            &format!("focal length {f:.0} mm (views {spacing} mm apart)"),
+            l(1.0, 9, spacing, 500.0),
+        ));
+    }
+    // Views behind each lenslet, at the same spacing.
+    for v in [5u32, 7, 13] {
+        configs.push(SweepConfig::wave_on(&format!("views {v}×{v}"), l(1.0, v, 0.6, 500.0)));
+    }
+    // Viewing distance at the same focal length: the spacing scales with d, M does not.
+    for dist in [350.0, 700.0] {
+        configs.push(SweepConfig::wave_on(
+            &format!("viewing distance {dist} mm"),
+            l(1.0, 9, 0.6 * dist / 500.0, dist),
+        ));
+    }
+    for p in [4.0, 5.0] {
+        configs.push(SweepConfig {
+            pupil_mm: p,
+            ..SweepConfig::wave_base(&format!("pupil {p} mm"))
+        });
+    }
+    for (k, w) in [(0u32, 0.3), (12, 0.2)] {
+        configs.push(SweepConfig {
+            decoys: k,
+            decoy_weight: w,
+            ..SweepConfig::wave_base(&format!("K−1 = {k} decoys, weight {w}"))
+        });
+    }
+    configs
+}
+
 /// The sampled target of the sweep and the `secure` experiment (seed 4242, no pupil spread).
 pub(crate) fn sampled_target() -> VisionProfile {
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(4242);
@@ -562,15 +703,17 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
             adaptive_rounds: c.adaptive_rounds,
             adaptive_candidates: 32,
             adaptive_per_round: 6,
+            optics: c.optics,
             ..Default::default()
         },
     }
 }
 
 /// The sweep's evaluation: the population and a small camera grid; no key or head-movement checks.
-fn sweep_evaluation_options(population: u32) -> EvaluationOptions {
+fn sweep_evaluation_options(population: u32, optics: Optics) -> EvaluationOptions {
     EvaluationOptions {
         population,
+        optics,
         sub_rays: 12,
         key_directions: 0,
         head_offsets_mm: vec![],
@@ -595,7 +738,7 @@ fn sweep_point(
     let tgt = at_pupil(target, c.pupil_mm)?;
     let spec = sweep_spec(&c, &tgt, &document, max_iterations);
     let enc = encode(&spec, cache, &|_| {}, &cancel)?;
-    let options = sweep_evaluation_options(population);
+    let options = sweep_evaluation_options(population, c.optics);
     let ev = evaluate(
         &c.display,
         &enc.light_field,
@@ -609,9 +752,16 @@ fn sweep_point(
         &cancel,
     )?;
     let p = ev.report.population.as_ref().context("population evaluated")?;
+    let resolvability = eyekey_core::physics::resolvability::Resolvability::of(&c.display)
+        .bands
+        .iter()
+        .map(|b| b.resolvability)
+        .fold(f64::INFINITY, f64::min);
     let point = SweepPoint {
         label: c.label,
         display: c.display,
+        optics: c.optics,
+        resolvability,
         pupil_mm: c.pupil_mm,
         decoys: c.decoys,
         decoy: c.decoy,
@@ -623,8 +773,9 @@ fn sweep_point(
         seconds: t.elapsed().as_secs_f64(),
     };
     eprintln!(
-        "{:<60} target {:.2}  readable {:>5.1} %  p95 {:.2}  camera {:.2}  ({:.1} s)",
+        "{:<60} M {:.2}  target {:.2}  readable {:>5.1} %  p95 {:.2}  camera {:.2}  ({:.1} s)",
         point.label,
+        point.resolvability,
         point.target_legibility,
         100.0 * point.readable_fraction,
         point.p95_legibility,
@@ -648,10 +799,16 @@ fn pareto_frontier(points: &[SweepPoint]) -> Vec<&SweepPoint> {
         .collect()
 }
 
-/// The sweep's Markdown: the table of all points, the Pareto frontier and the point chosen for `secure`.
-fn sweep_markdown(points: &[SweepPoint]) -> Result<String> {
-    let mut md = table_header(&[
+/// The sweep's Markdown: the table of all points, the Pareto frontier and, under geometric optics, the point
+/// chosen for `secure`; under wave optics, the point with the fewest readers among those the target reads.
+fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
+    let mut md = format!(
+        "Forward model of the encoders and of every viewer: {optics:?} optics. Resolvability M is the smallest \
+         over the bands (views resolved while M ≥ 1; `eyekey display check`).\n\n"
+    );
+    md += &table_header(&[
         "configuration",
+        "resolvability M",
         "target legibility",
         "population readable",
         "population p95",
@@ -661,8 +818,9 @@ fn sweep_markdown(points: &[SweepPoint]) -> Result<String> {
     for p in points {
         writeln!(
             md,
-            "| {} | {:.2} | {:.1} % | {:.2} | {:.2} | {:.1} |",
+            "| {} | {:.2} | {:.2} | {:.1} % | {:.2} | {:.2} | {:.1} |",
             p.label,
+            p.resolvability,
             p.target_legibility,
             100.0 * p.readable_fraction,
             p.p95_legibility,
@@ -680,6 +838,24 @@ fn sweep_markdown(points: &[SweepPoint]) -> Result<String> {
             p.target_legibility,
             100.0 * p.readable_fraction
         )?;
+    }
+    if optics == Optics::Wave {
+        let threshold = eyekey_core::evaluation::DEFAULT_THRESHOLD;
+        match frontier
+            .iter()
+            .filter(|p| p.target_legibility >= threshold)
+            .min_by(|a, b| a.readable_fraction.total_cmp(&b.readable_fraction))
+        {
+            Some(best) => writeln!(
+                md,
+                "\nFewest readers among points where the target reads (legibility ≥ {threshold}): **{}** (target {:.2}, readable {:.1} %).",
+                best.label,
+                best.target_legibility,
+                100.0 * best.readable_fraction
+            )?,
+            None => writeln!(md, "\nThe target reads (legibility ≥ {threshold}) at no point.")?,
+        }
+        return Ok(md);
     }
     // The `secure` preset is chosen from the frontier: the fewest readers among points where the target reads
     // with legibility ≥ 0.85.
@@ -700,15 +876,27 @@ fn sweep_markdown(points: &[SweepPoint]) -> Result<String> {
 }
 
 /// Maps the design space to (target legibility, fraction of a sampled population that can read).
-pub fn sweep(out: &Path, population: u32, max_iterations: u32) -> Result<(String, Vec<SweepPoint>)> {
+/// Under geometric optics the configurations are the ones the `secure` preset was chosen from; under wave
+/// optics, displays that resolve their views (`wave_sweep_configs`).
+pub fn sweep(out: &Path, population: u32, max_iterations: u32, optics: Optics) -> Result<(String, Vec<SweepPoint>)> {
     create_out(out)?;
     let cache = TransportCache::default();
     let target = sampled_target();
-    let points = sweep_configs()
+    let configs = match optics {
+        Optics::Geometric => sweep_configs(),
+        Optics::Wave => wave_sweep_configs(),
+    };
+    // Every display is checked before the first one runs, so a bad configuration does not cost the others.
+    for c in &configs {
+        c.display
+            .validate()
+            .with_context(|| format!("sweep configuration \"{}\"", c.label))?;
+    }
+    let points = configs
         .into_iter()
         .map(|c| sweep_point(c, &target, population, max_iterations, &cache))
         .collect::<Result<Vec<_>>>()?;
-    let md = sweep_markdown(&points)?;
+    let md = sweep_markdown(&points, optics)?;
     std::fs::write(out.join("sweep.md"), &md)?;
     std::fs::write(out.join("sweep.json"), serde_json::to_string_pretty(&points)?)?;
     Ok((md, points))

@@ -11,6 +11,7 @@
 pub mod attackers;
 mod contact_sheet;
 mod key_sensitivity;
+mod known_font;
 mod metrics;
 mod options;
 mod reference;
@@ -19,6 +20,7 @@ mod report;
 use attackers::*;
 pub use contact_sheet::contact_sheet;
 use key_sensitivity::*;
+pub use known_font::{DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
 pub use metrics::*;
 pub use options::EvaluationOptions;
 pub use reference::Reference;

@@ -51,37 +51,80 @@ fn glyph(c: char) -> Option<[u8; 7]> {
     })
 }
 
-/// Renders lines of text, black on white, at `scale` pixels per font dot, into a `width`×`height` image
-/// (text centred). Characters without a glyph are drawn as blanks.
-pub fn render_text(lines: &[&str], width: u32, height: u32, scale: u32) -> RgbImage {
-    let mut img = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
+/// Where one character of [`render_text`]'s layout is drawn: its glyph's top-left corner and the scale, in
+/// document pixels; the glyph covers 5·scale × 7·scale pixels of a 6·scale × 9·scale character cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlyphCell {
+    /// The character.
+    pub ch: char,
+    /// Line index.
+    pub line: usize,
+    /// Left edge of the glyph, document pixels (may lie outside the image when the text does not fit).
+    pub x: i64,
+    /// Top edge of the glyph, document pixels.
+    pub y: i64,
+    /// Pixels per font dot.
+    pub scale: u32,
+}
+
+/// The layout [`render_text`] draws: every character of every line (spaces included) with its position.
+pub fn text_cells(lines: &[&str], width: u32, height: u32, scale: u32) -> Vec<GlyphCell> {
     let s = scale.max(1);
     let line_h = 9 * s;
     let total_h = line_h * lines.len() as u32;
     let top = height.saturating_sub(total_h) / 2 + s;
+    let mut cells = Vec::new();
     for (k, line) in lines.iter().enumerate() {
         let n = line.chars().count() as u32;
         let line_w = n * 6 * s;
         let left = width.saturating_sub(line_w) / 2 + s / 2;
         for (ci, ch) in line.chars().enumerate() {
-            let Some(rows) = glyph(ch) else { continue };
-            for (ry, bits) in rows.iter().enumerate() {
-                for rx in 0..5u32 {
-                    if bits & (0x10 >> rx) == 0 {
-                        continue;
-                    }
-                    for dy in 0..s {
-                        for dx in 0..s {
-                            let x = left + (ci as u32 * 6 + rx) * s + dx;
-                            let y = top + k as u32 * line_h + ry as u32 * s + dy;
-                            if x < width && y < height {
-                                img.put_pixel(x, y, Rgb([0, 0, 0]));
-                            }
-                        }
+            cells.push(GlyphCell {
+                ch,
+                line: k,
+                x: left as i64 + (ci as i64 * 6) * s as i64,
+                y: top as i64 + (k as i64) * line_h as i64,
+                scale: s,
+            });
+        }
+    }
+    cells
+}
+
+/// Whether the font has a glyph for `c` (letters are drawn in upper case).
+pub fn has_glyph(c: char) -> bool {
+    glyph(c).is_some()
+}
+
+/// Draws character `c` black with its glyph's top-left corner at (x, y) and `scale` pixels per font dot;
+/// characters without a glyph draw nothing.
+pub fn draw_glyph(img: &mut RgbImage, c: char, x: i64, y: i64, scale: u32) {
+    let Some(rows) = glyph(c) else { return };
+    let s = scale.max(1) as i64;
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    for (ry, bits) in rows.iter().enumerate() {
+        for rx in 0..5i64 {
+            if bits & (0x10 >> rx) == 0 {
+                continue;
+            }
+            for dy in 0..s {
+                for dx in 0..s {
+                    let (px, py) = (x + rx * s + dx, y + ry as i64 * s + dy);
+                    if (0..w).contains(&px) && (0..h).contains(&py) {
+                        img.put_pixel(px as u32, py as u32, Rgb([0, 0, 0]));
                     }
                 }
             }
         }
+    }
+}
+
+/// Renders lines of text, black on white, at `scale` pixels per font dot, into a `width`×`height` image
+/// (text centred). Characters without a glyph are drawn as blanks.
+pub fn render_text(lines: &[&str], width: u32, height: u32, scale: u32) -> RgbImage {
+    let mut img = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
+    for c in text_cells(lines, width, height, scale) {
+        draw_glyph(&mut img, c.ch, c.x, c.y, c.scale);
     }
     img
 }

@@ -1,0 +1,360 @@
+//! The known-font attacker (docs/design.md §4, "The judge"): a matched filter per character cell for a
+//! document whose alphabet, font and layout are known.
+//!
+//! For every secret cell (a character of the document's text that belongs to the alphabet) the attacker holds a
+//! template per candidate glyph: the document with only that glyph drawn, resized to the retinal grid exactly as
+//! the document is ([`crate::imaging::resize`]), cropped to the character's 6×9-dot cell. It reads the view after
+//! each denoising strength of [`DENOISE_SIGMAS`] and in both polarities (a negative image is as readable as a
+//! positive one) and with the whole text moved by up to ±1 grid pixel either way: per cell, the candidate with
+//! the highest normalised cross-correlation. Of those (denoising, shift, polarity) readings it answers with the
+//! one it is most confident of (the highest mean winning correlation): one answer, so its chance of guessing right is |alphabet|^−n for n secret
+//! cells. The view is read when every secret character is right.
+
+use image::{Rgb, RgbImage};
+use serde::{Deserialize, Serialize};
+
+use crate::evaluation::{gaussian_blur, image_luminance, ncc, DENOISE_SIGMAS};
+use crate::imaging::{self, glyphs};
+
+/// The text of a document drawn by [`glyphs::render_text`], and which of its characters are secret.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct DocumentText {
+    /// The lines, as rendered.
+    pub lines: Vec<String>,
+    /// Pixels per font dot, as rendered.
+    pub scale: u32,
+    /// Characters an attacker must tell apart (e.g. "0123456789" for a PIN); the text's other characters are
+    /// known to the attacker (labels such as "PIN").
+    pub alphabet: String,
+}
+
+/// Why a known-font attacker cannot be made.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum KnownFontError {
+    /// The alphabet has a character the font cannot draw, or fewer than two characters.
+    #[error("alphabet: {0}")]
+    Alphabet(String),
+    /// No character of the text is in the alphabet.
+    #[error("the text has no character of the alphabet: nothing is secret")]
+    NothingSecret,
+    /// A secret character's cell does not lie inside the document.
+    #[error("character {index} ('{ch}') lies outside the {width}×{height} document")]
+    OutsideDocument {
+        /// Its index among the text's characters.
+        index: usize,
+        /// The character.
+        ch: char,
+        /// Document width.
+        width: u32,
+        /// Document height.
+        height: u32,
+    },
+}
+
+/// One secret character's cell on the retinal grid and its candidates' templates.
+#[derive(Clone, Debug)]
+struct Cell {
+    truth: char,
+    /// Cell box on the grid: x0, y0, width, height.
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    /// One template (luminance, row-major in the box) per alphabet character.
+    templates: Vec<Vec<f32>>,
+}
+
+/// What the attacker made of one view.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct KnownFontRead {
+    /// The secret characters as read, in text order.
+    pub text: String,
+    /// Every secret character right.
+    pub correct: bool,
+    /// How many secret characters are right.
+    pub characters_right: u32,
+    /// Secret characters in the document.
+    pub characters: u32,
+    /// The reading's mean winning correlation (the attacker's confidence).
+    pub confidence: f64,
+    /// Probability of reading right by guessing, |alphabet|^−n.
+    pub chance: f64,
+}
+
+/// The matched-filter attacker for one document on one retinal grid.
+#[derive(Clone, Debug)]
+pub struct KnownFontAttacker {
+    alphabet: Vec<char>,
+    cells: Vec<Cell>,
+    width: usize,
+    height: usize,
+}
+
+impl KnownFontAttacker {
+    /// The attacker for `text` drawn on a `doc_width`×`doc_height` document, reading views on a
+    /// `grid_width`×`grid_height` retinal grid.
+    pub fn new(
+        text: &DocumentText,
+        doc_width: u32,
+        doc_height: u32,
+        grid_width: u32,
+        grid_height: u32,
+    ) -> Result<Self, KnownFontError> {
+        let mut alphabet: Vec<char> = text.alphabet.chars().map(|c| c.to_ascii_uppercase()).collect();
+        alphabet.sort_unstable();
+        alphabet.dedup();
+        if alphabet.len() < 2 {
+            return Err(KnownFontError::Alphabet("needs at least two characters".into()));
+        }
+        if let Some(c) = alphabet.iter().find(|c| !glyphs::has_glyph(**c) || **c == ' ') {
+            return Err(KnownFontError::Alphabet(format!("the font has no glyph for '{c}'")));
+        }
+        let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+        let layout = glyphs::text_cells(&lines, doc_width, doc_height, text.scale);
+        let (fx, fy) = (
+            grid_width as f64 / doc_width as f64,
+            grid_height as f64 / doc_height as f64,
+        );
+        let mut cells = Vec::new();
+        for (index, g) in layout.iter().enumerate() {
+            let ch = g.ch.to_ascii_uppercase();
+            if !alphabet.contains(&ch) {
+                continue;
+            }
+            // The character's cell: 6×9 font dots around its 5×7 glyph (half a dot either side, one above and
+            // one below), in document pixels, then on the grid.
+            let s = g.scale as f64;
+            let (dx0, dy0) = (g.x as f64 - 0.5 * s, g.y as f64 - s);
+            let (dx1, dy1) = (dx0 + 6.0 * s, dy0 + 9.0 * s);
+            if dx0 < 0.0 || dy0 < 0.0 || dx1 > doc_width as f64 || dy1 > doc_height as f64 {
+                return Err(KnownFontError::OutsideDocument {
+                    index,
+                    ch: g.ch,
+                    width: doc_width,
+                    height: doc_height,
+                });
+            }
+            let x0 = (dx0 * fx).floor() as usize;
+            let y0 = (dy0 * fy).floor() as usize;
+            let x1 = ((dx1 * fx).ceil() as usize).min(grid_width as usize);
+            let y1 = ((dy1 * fy).ceil() as usize).min(grid_height as usize);
+            let (w, h) = (x1 - x0, y1 - y0);
+            let templates = alphabet
+                .iter()
+                .map(|&c| {
+                    let mut doc = RgbImage::from_pixel(doc_width, doc_height, Rgb([255, 255, 255]));
+                    glyphs::draw_glyph(&mut doc, c, g.x, g.y, g.scale);
+                    let lum = image_luminance(&imaging::resize(&doc, grid_width, grid_height));
+                    crop(&lum, grid_width as usize, x0 as isize, y0 as isize, w, h)
+                })
+                .collect();
+            cells.push(Cell {
+                truth: ch,
+                x0,
+                y0,
+                w,
+                h,
+                templates,
+            });
+        }
+        if cells.is_empty() {
+            return Err(KnownFontError::NothingSecret);
+        }
+        Ok(Self {
+            alphabet,
+            cells,
+            width: grid_width as usize,
+            height: grid_height as usize,
+        })
+    }
+
+    /// Secret characters in the document.
+    pub fn characters(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Probability of reading every secret character right by guessing.
+    pub fn chance(&self) -> f64 {
+        (self.alphabet.len() as f64).powi(-(self.cells.len() as i32))
+    }
+
+    /// Reads a luminance view (row-major on the grid).
+    pub fn read(&self, view: &[f32]) -> KnownFontRead {
+        assert_eq!(view.len(), self.width * self.height, "view size");
+        let mut best: Option<(f64, Vec<char>)> = None;
+        for &sigma in &DENOISE_SIGMAS {
+            let v = gaussian_blur(view, self.width, self.height, sigma);
+            for dy in -1isize..=1 {
+                for dx in -1isize..=1 {
+                    // The whole text moves together: per cell and candidate, the correlation at this shift.
+                    let Some(scores) = self
+                        .cells
+                        .iter()
+                        .map(|c| self.cell_scores(c, &v, dx, dy))
+                        .collect::<Option<Vec<_>>>()
+                    else {
+                        continue;
+                    };
+                    for polarity in [1.0, -1.0] {
+                        let mut read = Vec::with_capacity(self.cells.len());
+                        let mut total = 0.0;
+                        for cell_scores in &scores {
+                            let (k, s) = cell_scores
+                                .iter()
+                                .map(|r| polarity * r)
+                                .enumerate()
+                                .fold((0, f64::NEG_INFINITY), |a, (k, s)| if s > a.1 { (k, s) } else { a });
+                            read.push(self.alphabet[k]);
+                            total += s;
+                        }
+                        let confidence = total / self.cells.len() as f64;
+                        if best.as_ref().is_none_or(|b| confidence > b.0) {
+                            best = Some((confidence, read));
+                        }
+                    }
+                }
+            }
+        }
+        let (confidence, read) = best.expect("the unshifted reading always exists");
+        let right = read.iter().zip(&self.cells).filter(|(r, c)| **r == c.truth).count() as u32;
+        KnownFontRead {
+            text: read.into_iter().collect(),
+            correct: right as usize == self.cells.len(),
+            characters_right: right,
+            characters: self.cells.len() as u32,
+            confidence,
+            chance: self.chance(),
+        }
+    }
+
+    /// The correlation of each candidate of `cell` with the view's cell moved by (dx, dy) grid pixels; `None`
+    /// when the moved cell leaves the grid.
+    fn cell_scores(&self, cell: &Cell, view: &[f32], dx: isize, dy: isize) -> Option<Vec<f64>> {
+        let (x0, y0) = (cell.x0 as isize + dx, cell.y0 as isize + dy);
+        if x0 < 0 || y0 < 0 || x0 as usize + cell.w > self.width || y0 as usize + cell.h > self.height {
+            return None;
+        }
+        let patch = crop(view, self.width, x0, y0, cell.w, cell.h);
+        Some(cell.templates.iter().map(|t| ncc(&patch, t)).collect())
+    }
+}
+
+/// The `w`×`h` box at (x0, y0) of a row-major image `width` wide (the box must lie inside it).
+fn crop(img: &[f32], width: usize, x0: isize, y0: isize, w: usize, h: usize) -> Vec<f32> {
+    let (x0, y0) = (x0 as usize, y0 as usize);
+    (0..h)
+        .flat_map(|y| img[(y0 + y) * width + x0..(y0 + y) * width + x0 + w].iter().copied())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    fn pin(digits: &str) -> (DocumentText, RgbImage) {
+        let text = DocumentText {
+            lines: vec!["PIN".into(), digits.into()],
+            scale: 4,
+            alphabet: "0123456789".into(),
+        };
+        let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+        (text.clone(), glyphs::render_text(&lines, 128, 128, text.scale))
+    }
+
+    fn view_of(doc: &RgbImage, grid: u32) -> Vec<f32> {
+        image_luminance(&imaging::resize(doc, grid, grid))
+    }
+
+    /// A view that is the document itself is read right, at both grid scales, and with a correlation of 1:
+    /// the templates are the document's own glyphs resized the same way.
+    #[test]
+    fn reads_the_document_itself() {
+        let (text, doc) = pin("4821");
+        for grid in [64u32, 128] {
+            let a = KnownFontAttacker::new(&text, 128, 128, grid, grid).unwrap();
+            let r = a.read(&view_of(&doc, grid));
+            assert_eq!(r.text, "4821");
+            assert!(r.correct && r.characters_right == 4 && r.characters == 4);
+            assert!((r.confidence - 1.0).abs() < 1e-6, "{}", r.confidence);
+            assert!((r.chance - 1e-4).abs() < 1e-12);
+        }
+    }
+
+    /// A different PIN in the same layout is read as that PIN, so the attack reads the view, not the truth;
+    /// an inverted and faint view (the document at 5 % contrast, negative) is read too.
+    #[test]
+    fn reads_what_is_shown_in_either_polarity_and_at_low_contrast() {
+        let (text, _) = pin("4821");
+        let a = KnownFontAttacker::new(&text, 128, 128, 64, 64).unwrap();
+        let (_, other) = pin("0736");
+        let r = a.read(&view_of(&other, 64));
+        assert_eq!(r.text, "0736");
+        assert!(!r.correct && r.characters_right == 0);
+        let (_, doc) = pin("4821");
+        let faint: Vec<f32> = view_of(&doc, 64).iter().map(|v| 0.5 - 0.05 * v).collect();
+        assert_eq!(a.read(&faint).text, "4821");
+    }
+
+    /// Views below the legibility threshold that the matched filter reads: the document under Gaussian noise of
+    /// standard deviation 3 (its luminance contrast is 1) on a 128² grid scores legibility ≈ 0.31, under the
+    /// threshold of 0.38, while a cell of ~860 pixels averages the noise down to ~3/√860 ≈ 0.1 of its
+    /// correlation: the attacker reads several of 20 such views (8 with this seed). Pure noise is read right
+    /// only at about chance (10⁻⁴): 0 of 200 noise views.
+    #[test]
+    fn reads_views_below_the_legibility_threshold_but_not_noise_alone() {
+        let (text, doc) = pin("4821");
+        let a = KnownFontAttacker::new(&text, 128, 128, 128, 128).unwrap();
+        let clean = view_of(&doc, 128);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let normal = Normal::new(0.0f32, 3.0).unwrap();
+        let (mut read, mut legibility) = (0, 0.0);
+        for _ in 0..20 {
+            let noisy: Vec<f32> = clean.iter().map(|v| v + normal.sample(&mut rng)).collect();
+            legibility += crate::evaluation::legibility(&noisy, &clean, 128, 128) / 20.0;
+            read += a.read(&noisy).correct as u32;
+        }
+        assert!(
+            legibility < crate::evaluation::DEFAULT_THRESHOLD,
+            "mean legibility {legibility}"
+        );
+        assert!(read >= 5, "read {read} of 20");
+        let unit = Normal::new(0.0f32, 1.0).unwrap();
+        let right = (0..200)
+            .filter(|_| {
+                let noise: Vec<f32> = clean.iter().map(|_| unit.sample(&mut rng)).collect();
+                a.read(&noise).correct
+            })
+            .count();
+        assert_eq!(right, 0);
+    }
+
+    #[test]
+    fn refuses_a_text_with_nothing_secret_or_a_bad_alphabet() {
+        let (mut text, _) = pin("4821");
+        text.alphabet = "XY".into();
+        assert_eq!(
+            KnownFontAttacker::new(&text, 128, 128, 64, 64).unwrap_err(),
+            KnownFontError::NothingSecret
+        );
+        text.alphabet = "1".into();
+        assert!(matches!(
+            KnownFontAttacker::new(&text, 128, 128, 64, 64),
+            Err(KnownFontError::Alphabet(_))
+        ));
+        text.alphabet = "01é".into();
+        assert!(matches!(
+            KnownFontAttacker::new(&text, 128, 128, 64, 64),
+            Err(KnownFontError::Alphabet(_))
+        ));
+        text.alphabet = "0123456789".into();
+        text.scale = 40;
+        assert!(matches!(
+            KnownFontAttacker::new(&text, 128, 128, 64, 64),
+            Err(KnownFontError::OutsideDocument { .. })
+        ));
+    }
+}
