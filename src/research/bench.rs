@@ -19,7 +19,7 @@ use eyekey_core::encoding::solver::{minimise, Objective, SolverOptions};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{Observer, Optics};
 use eyekey_core::physics::profile::VisionProfile;
-use eyekey_core::physics::transport::{EyePosition, TransportMatrix, TransportOptions};
+use eyekey_core::physics::transport::{EyePosition, ProductMethod, TransportMatrix, TransportOptions};
 
 /// Peak resident memory of this process so far, bytes (Linux `VmHWM`; 0 elsewhere).
 pub fn peak_memory_bytes() -> u64 {
@@ -207,8 +207,15 @@ struct WaveFigures {
     name: String,
     display: DisplayGeometry,
     build: f64,
-    forward: f64,
-    adjoint: f64,
+    /// Forward and adjoint, all bands, by stencils and by FFT.
+    stencil: (f64, f64),
+    fft: (f64, f64),
+    /// What the operators chose.
+    chosen: ProductMethod,
+    /// The first FFT product's time, which computes the kernels' spectra.
+    fft_first: f64,
+    /// Bytes of the kernels' spectra, all bands.
+    spectra_bytes: usize,
     /// Multiply-adds of one product, all bands.
     mads: usize,
     /// Bytes the stencils hold, all bands.
@@ -252,16 +259,31 @@ fn wave_figures(name: &str, sub_rays: u32) -> Result<WaveFigures> {
     let l: Vec<f32> = (0..samples * n).map(|i| (i % 13) as f32 / 13.0).collect();
     let mut y = vec![0f32; ts[0].n_pixels() * 3];
     let mut x = vec![0f32; samples * n];
-    let forward = time_best(10, || {
+    let chosen = ts[0]
+        .product_method()
+        .context("a wave operator at the design distance")?;
+    let mut time_method = |method: ProductMethod| {
+        let ts: Vec<_> = ts.iter().map(|t| t.with_product_method(method)).collect();
+        let t0 = std::time::Instant::now();
         for (band, t) in ts.iter().enumerate() {
             t.forward_band_lms(None, &l, n, band, coupling[band], band > 0, &mut y);
         }
-    });
-    let adjoint = time_best(10, || {
-        for (band, t) in ts.iter().enumerate() {
-            t.adjoint_band_lms(None, &y, n, band, coupling[band], &mut x);
-        }
-    });
+        let first = t0.elapsed().as_secs_f64();
+        let forward = time_best(10, || {
+            for (band, t) in ts.iter().enumerate() {
+                t.forward_band_lms(None, &l, n, band, coupling[band], band > 0, &mut y);
+            }
+        });
+        let adjoint = time_best(10, || {
+            for (band, t) in ts.iter().enumerate() {
+                t.adjoint_band_lms(None, &y, n, band, coupling[band], &mut x);
+            }
+        });
+        let held: usize = ts.iter().map(|t| t.memory_bytes()).sum();
+        (forward, adjoint, first, held)
+    };
+    let stencil = time_method(ProductMethod::Stencil);
+    let fft = time_method(ProductMethod::Fft);
     let mads: usize = ts.iter().map(|t| t.nnz()).sum();
     let bytes: usize = ts.iter().map(|t| t.memory_bytes()).sum();
     let csr_bytes: usize = ts
@@ -294,8 +316,11 @@ fn wave_figures(name: &str, sub_rays: u32) -> Result<WaveFigures> {
         name: name.to_string(),
         display,
         build,
-        forward,
-        adjoint,
+        stencil: (stencil.0, stencil.1),
+        fft: (fft.0, fft.1),
+        chosen,
+        fft_first: fft.2,
+        spectra_bytes: fft.3 - stencil.3,
         mads,
         bytes,
         csr_bytes,
@@ -314,8 +339,11 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
         "Roofline: {peak:.1} GFLOP/s, the multiply-add peak of the stencils' own vector code ({}) on {} \
          threads (`multiply_add_peak_gflops`: register-resident chains, no loads or stores). The kernels take \
          a few hundred KiB and a light field a few MiB, so the products run from cache; the roofline is the FMA \
-         units' throughput and FLOPs (2 per multiply-add) are the measure. \"Geometric\" is the same display's traced CSR operator \
-         and fused kernels (one T for every band), built and timed in the same run.\n\n",
+         units' throughput and FLOPs (2 per multiply-add) are the measure for the stencils. The FFT products \
+         (`transport/fft.rs`) compute the same operator on a zero-padded grid; their work does not grow with \
+         the taps. \"Chosen\" is what the operators pick by their cost model (`fft_is_cheaper`). \
+         \"Geometric\" is the same display's traced CSR operator and fused kernels (one T for every band), \
+         built and timed in the same run.\n\n",
         eyekey_core::physics::transport::vector_isa(),
         rayon::current_num_threads()
     );
@@ -325,19 +353,26 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
         "one person's 4-band kernels built",
         "stencils held",
         "as CSR it would take",
-        "S = Σ c_n T_n L_n",
-        "adjoint",
-        "fraction of roofline (forward / adjoint)",
+        "stencils: S = Σ c_n T_n L_n / adjoint",
+        "stencils' fraction of roofline (forward / adjoint)",
+        "FFT: S / adjoint",
+        "FFT: first product (spectra) / spectra held",
+        "chosen",
         "geometric CSR A·L / Aᵀ·y",
-        "wave / geometric time (forward / adjoint)",
+        "chosen / geometric time (forward / adjoint)",
     ]));
     for name in ["paper", "lenslet", "pinhole", "secure"] {
         let f = wave_figures(name, sub_rays)?;
         let d = &f.display;
         let flops = 2.0 * f.mads as f64;
+        let chosen = match f.chosen {
+            ProductMethod::Stencil => f.stencil,
+            ProductMethod::Fft => f.fft,
+        };
+        let mib = |b: usize| b as f64 / (1 << 20) as f64;
         writeln!(
             out,
-            "| {} ({}×{} holes, {}×{} views) | {:.0} / {} | {:.3} s | {:.2} MiB | {:.0} MiB | {:.2} ms | {:.2} ms | {:.0} % / {:.0} % | {:.2} / {:.2} ms | {:.1}× / {:.1}× |",
+            "| {} ({}×{} holes, {}×{} views) | {:.0} / {} | {:.3} s | {:.2} MiB | {:.0} MiB | {:.2} / {:.2} ms | {:.0} % / {:.0} % | {:.2} / {:.2} ms | {:.1} ms / {:.1} MiB | {} | {:.2} / {:.2} ms | {:.1}× / {:.1}× |",
             f.name,
             d.holes_x,
             d.holes_y,
@@ -346,16 +381,24 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
             f.taps.0,
             f.taps.1,
             f.build,
-            f.bytes as f64 / (1 << 20) as f64,
-            f.csr_bytes as f64 / (1 << 20) as f64,
-            f.forward * 1e3,
-            f.adjoint * 1e3,
-            100.0 * flops / f.forward / 1e9 / peak,
-            100.0 * flops / f.adjoint / 1e9 / peak,
+            mib(f.bytes),
+            mib(f.csr_bytes),
+            f.stencil.0 * 1e3,
+            f.stencil.1 * 1e3,
+            100.0 * flops / f.stencil.0 / 1e9 / peak,
+            100.0 * flops / f.stencil.1 / 1e9 / peak,
+            f.fft.0 * 1e3,
+            f.fft.1 * 1e3,
+            f.fft_first * 1e3,
+            mib(f.spectra_bytes),
+            match f.chosen {
+                ProductMethod::Stencil => "stencils",
+                ProductMethod::Fft => "FFT",
+            },
             f.geometric_forward * 1e3,
             f.geometric_adjoint * 1e3,
-            f.forward / f.geometric_forward,
-            f.adjoint / f.geometric_adjoint,
+            chosen.0 / f.geometric_forward,
+            chosen.1 / f.geometric_adjoint,
         )?;
     }
     writeln!(

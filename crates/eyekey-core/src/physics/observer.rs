@@ -417,6 +417,23 @@ mod tests {
         assert!(ok.transports.iter().all(|t| t.is_stencil()));
         let bytes: usize = ok.transports.iter().map(|t| t.memory_bytes()).sum();
         assert!(bytes < 8 << 20, "{bytes}");
+        // Kernels this wide are applied by FFT (its work does not grow with the taps), from the second product
+        // on: the first, by stencils, and the second agree to f32 rounding, and the spectra stay within bounds.
+        assert!(ok
+            .transports
+            .iter()
+            .all(|t| t.product_method() == Some(crate::physics::transport::ProductMethod::Fft)));
+        let t = &ok.transports[0];
+        let l: Vec<f32> = (0..t.n_samples()).map(|i| ((i * 7919) % 101) as f32 / 101.0).collect();
+        let mut first = vec![0f32; t.n_pixels() * 3];
+        let mut second = first.clone();
+        t.forward_band_lms(None, &l, 1, 0, [1.0, 0.5, 0.25], false, &mut first);
+        t.forward_band_lms(None, &l, 1, 0, [1.0, 0.5, 0.25], false, &mut second);
+        let peak = first.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let worst = first.iter().zip(&second).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(peak > 0.0 && worst < 1e-4 * peak, "{worst} of {peak}");
+        let with_spectra: usize = ok.transports.iter().map(|t| t.memory_bytes()).sum();
+        assert!(with_spectra > bytes && with_spectra < 12 << 20, "{with_spectra}");
         // An eye 100 mm farther is traced sample by sample; on the lenslet preset that operator takes about
         // 15 MiB per band. Under a 4 MiB bound it is refused, with the reason, before T is assembled.
         let far = EyePosition {

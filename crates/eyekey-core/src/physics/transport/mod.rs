@@ -17,6 +17,7 @@
 
 mod cache;
 mod csr;
+mod fft;
 mod grid;
 mod kernels;
 mod rng;
@@ -34,7 +35,7 @@ pub const MAX_WAVE_OPERATOR_BYTES: usize = 256 << 20;
 pub use csr::CsrMatrix;
 pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND};
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
-pub use stencil::{multiply_add_peak_gflops, vector_isa, StencilOperator};
+pub use stencil::{multiply_add_peak_gflops, vector_isa, ProductMethod, StencilOperator};
 
 use rayon::prelude::*;
 
@@ -273,6 +274,24 @@ impl TransportMatrix {
     /// True when T is held as per-view stencils.
     pub fn is_stencil(&self) -> bool {
         matches!(self.repr, Repr::Stencil(_))
+    }
+
+    /// How a per-view (stencil-held) operator computes its products; `None` for a traced CSR operator.
+    pub fn product_method(&self) -> Option<ProductMethod> {
+        match &self.repr {
+            Repr::Sparse(_) => None,
+            Repr::Stencil(st) => Some(st.method()),
+        }
+    }
+
+    /// The same operator with a per-view operator's products computed by `method` (a CSR operator is
+    /// returned as it is).
+    pub fn with_product_method(&self, method: ProductMethod) -> Self {
+        let mut t = self.clone();
+        if let Repr::Stencil(st) = &self.repr {
+            t.repr = Repr::Stencil(st.with_method(method));
+        }
+        t
     }
 
     /// Light-field sample `p`'s retinal pixels and weights: T's column p.

@@ -13,8 +13,11 @@
 //!
 //! Taps that would land off the retinal grid are dropped, as in a traced T.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
+use super::fft::{fft_is_cheaper, FftKernels};
 use crate::physics::display::DisplayGeometry;
 
 /// One view's kernel: a dense box of weights (and of ∂/∂W_j per term) over retinal offsets
@@ -88,6 +91,29 @@ pub struct StencilOperator {
     views: Vec<ViewStencil>,
     /// How the products lay out their rows, derived from the kernels once.
     layout: Layout,
+    /// The same kernels as spectra, when the products run by FFT.
+    fft: FftSlot,
+}
+
+/// How a wave operator's products are computed (the same operator either way, to rounding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProductMethod {
+    /// Register-blocked stencils: work grows with the kernels' taps.
+    Stencil,
+    /// FFTs on a zero-padded grid: work grows with the grid, whatever the kernels' size.
+    Fft,
+}
+
+/// The FFT form of a stencil operator, if its products use it; derived from the kernels, so two operators
+/// with equal kernels are equal whatever their slots hold.
+#[derive(Clone)]
+struct FftSlot(Option<Arc<FftKernels>>);
+
+impl PartialEq for FftSlot {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl std::fmt::Debug for StencilOperator {
@@ -103,6 +129,7 @@ impl std::fmt::Debug for StencilOperator {
             .field("k", &self.k)
             .field("largest_kernel", &largest)
             .field("bytes", &self.memory_bytes())
+            .field("method", &self.method())
             .finish()
     }
 }
@@ -396,7 +423,7 @@ impl StencilOperator {
         );
         let (k, holes_x) = (k.max(1) as usize, display.holes_x as usize);
         let layout = Layout::of(&views, k, holes_x);
-        Self {
+        let mut op = Self {
             holes_x,
             holes_y: display.holes_y as usize,
             views_u: display.views_u as usize,
@@ -404,7 +431,53 @@ impl StencilOperator {
             k,
             views,
             layout,
+            fft: FftSlot(None),
+        };
+        op.choose_method();
+        op
+    }
+
+    /// Uses the FFT products when [`fft_is_cheaper`] says so for these kernels.
+    fn choose_method(&mut self) {
+        let kernels = self.fft_kernels(true);
+        let (p, q) = kernels.size();
+        let method = if fft_is_cheaper(self.nnz(), self.n_views(), p, q) {
+            ProductMethod::Fft
+        } else {
+            ProductMethod::Stencil
+        };
+        self.fft = FftSlot((method == ProductMethod::Fft).then(|| Arc::new(kernels)));
+    }
+
+    /// The FFT form of the kernels; `deferred`: each term's first product still runs by stencils.
+    fn fft_kernels(&self, deferred: bool) -> FftKernels {
+        FftKernels::new(
+            &self.views,
+            (self.holes_x, self.holes_y),
+            (self.views_u, self.views_v),
+            self.k,
+            self.views.first().map_or(0, |v| v.derivatives.len()),
+            deferred,
+        )
+    }
+
+    /// How the products are computed.
+    pub fn method(&self) -> ProductMethod {
+        if self.fft.0.is_some() {
+            ProductMethod::Fft
+        } else {
+            ProductMethod::Stencil
         }
+    }
+
+    /// The same operator with its products computed by `method` (from the first product on).
+    pub fn with_method(&self, method: ProductMethod) -> Self {
+        let mut op = self.clone();
+        op.fft = FftSlot(match method {
+            ProductMethod::Fft => Some(Arc::new(self.fft_kernels(false))),
+            ProductMethod::Stencil => None,
+        });
+        op
     }
 
     /// Σ_q w_q·K_q per view (and per derivative term): the operator of light that is a mixture of the
@@ -436,11 +509,13 @@ impl StencilOperator {
                 ViewStencil::from_taps(&refs, n_terms)
             })
             .collect();
-        Self {
+        let mut op = Self {
             layout: Layout::of(&views, first.k, first.holes_x),
             views,
             ..first.clone()
-        }
+        };
+        op.choose_method();
+        op
     }
 
     /// Light-field samples per band.
@@ -457,12 +532,13 @@ impl StencilOperator {
         self.views_u * self.views_v
     }
 
-    /// Bytes held by the kernels.
+    /// Bytes held by the kernels (and their spectra, once computed).
     pub fn memory_bytes(&self) -> usize {
         self.views
             .iter()
             .map(|v| 4 * v.weights.len() * (1 + v.derivatives.len()))
-            .sum()
+            .sum::<usize>()
+            + self.fft.0.as_ref().map_or(0, |f| f.memory_bytes())
     }
 
     /// The multiply-adds of one band's product: every stored tap once per sample whose landing it keeps.
@@ -522,6 +598,9 @@ impl StencilOperator {
     ) {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
         assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
+        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
+            return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
+        }
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
         let layout = &self.layout;
         let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
@@ -576,6 +655,9 @@ impl StencilOperator {
     ) {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
+        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
+            return f.adjoint_band(&self.views, term, y, n_bands, band, c, out);
+        }
         let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
         let layout = &self.layout;
         let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
@@ -685,15 +767,16 @@ mod tests {
         t
     }
 
+    /// Both ways of computing the products (stencils and FFTs, `super::super::fft`) against T written out.
     #[test]
     fn the_stencil_products_equal_the_written_out_matrix_and_its_transpose() {
         let n_bands = 3;
         let c = [0.7f32, -0.2, 0.4];
-        for (d, k) in displays()
-            .into_iter()
-            .flat_map(|d| (1..=3).map(move |k| (d.clone(), k)))
-        {
-            let op = operator(&d, k, 11 + k as u64);
+        for (d, k, method) in displays().into_iter().flat_map(|d| {
+            (1..=3).flat_map(move |k| [ProductMethod::Stencil, ProductMethod::Fft].map(|m| (d.clone(), k, m)))
+        }) {
+            let op = operator(&d, k, 11 + k as u64).with_method(method);
+            assert_eq!(op.method(), method);
             for term in [None, Some(0)] {
                 let t = dense(&op, &d, term);
                 let l = random(op.n_samples() * n_bands, 3);
@@ -708,7 +791,8 @@ mod tests {
                         let want = before[r * 3 + a] as f64 + c[a] as f64 * s;
                         assert!(
                             (out[r * 3 + a] as f64 - want).abs() < 1e-4,
-                            "k {k} {term:?} forward r {r}"
+                            "{method:?} k {k} {term:?} forward r {r}: {} against {want}",
+                            out[r * 3 + a]
                         );
                     }
                 }
@@ -722,7 +806,8 @@ mod tests {
                         .sum();
                     assert!(
                         (back[p * n_bands + 2] as f64 - want).abs() < 1e-4,
-                        "k {k} {term:?} adjoint p {p}"
+                        "{method:?} k {k} {term:?} adjoint p {p}: {} against {want}",
+                        back[p * n_bands + 2]
                     );
                     assert_eq!(back[p * n_bands], kept[p * n_bands]);
                     assert_eq!(back[p * n_bands + 1], kept[p * n_bands + 1]);
