@@ -66,7 +66,18 @@ pub fn paper_observers() -> Vec<(String, VisionProfile)> {
 
 /// A PIN slip: the test document of the experiments.
 pub fn pin_slip(width: u32, height: u32) -> RgbImage {
-    eyekey_core::imaging::glyphs::render_text(&["PIN", "4821"], width, height, (width / 28).max(1))
+    let text = pin_slip_text(width);
+    let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+    eyekey_core::imaging::glyphs::render_text(&lines, width, height, text.scale)
+}
+
+/// The text of [`pin_slip`] `width` pixels wide, for the known-font attacker: the digits are secret.
+pub fn pin_slip_text(width: u32) -> eyekey_core::evaluation::DocumentText {
+    eyekey_core::evaluation::DocumentText {
+        lines: vec!["PIN".into(), "4821".into()],
+        scale: (width / 28).max(1),
+        alphabet: "0123456789".into(),
+    }
 }
 
 #[derive(Serialize)]
@@ -380,8 +391,12 @@ pub struct SweepPoint {
     pub decoy: DecoyKind,
     pub decoy_weight: f64,
     pub target_legibility: f64,
-    /// Fraction of the sampled population that can read.
+    /// Whether the known-font attacker reads the target's view.
+    pub target_known_font: bool,
+    /// Fraction of the sampled population that can read (legibility ≥ threshold or the known-font attacker).
     pub readable_fraction: f64,
+    /// Fraction the known-font attacker reads.
+    pub known_font_fraction: f64,
     /// 95th-percentile legibility of the population.
     pub p95_legibility: f64,
     /// Camera attacker's best legibility.
@@ -710,10 +725,11 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
 }
 
 /// The sweep's evaluation: the population and a small camera grid; no key or head-movement checks.
-fn sweep_evaluation_options(population: u32, optics: Optics) -> EvaluationOptions {
+fn sweep_evaluation_options(population: u32, optics: Optics, document_width: u32) -> EvaluationOptions {
     EvaluationOptions {
         population,
         optics,
+        document_text: Some(pin_slip_text(document_width)),
         sub_rays: 12,
         key_directions: 0,
         head_offsets_mm: vec![],
@@ -738,7 +754,7 @@ fn sweep_point(
     let tgt = at_pupil(target, c.pupil_mm)?;
     let spec = sweep_spec(&c, &tgt, &document, max_iterations);
     let enc = encode(&spec, cache, &|_| {}, &cancel)?;
-    let options = sweep_evaluation_options(population, c.optics);
+    let options = sweep_evaluation_options(population, c.optics, g.0);
     let ev = evaluate(
         &c.display,
         &enc.light_field,
@@ -767,17 +783,21 @@ fn sweep_point(
         decoy: c.decoy,
         decoy_weight: c.decoy_weight,
         target_legibility: ev.report.target.legibility,
+        target_known_font: ev.report.target.known_font.as_ref().is_some_and(|k| k.correct),
         readable_fraction: p.readable_fraction,
+        known_font_fraction: p.known_font_readers.unwrap_or(0) as f64 / p.count.max(1) as f64,
         p95_legibility: p.p95_legibility,
         camera_best: camera_best(&ev.report),
         seconds: t.elapsed().as_secs_f64(),
     };
     eprintln!(
-        "{:<60} M {:.2}  target {:.2}  readable {:>5.1} %  p95 {:.2}  camera {:.2}  ({:.1} s)",
+        "{:<60} M {:.2}  target {:.2} (known font: {})  readable {:>5.1} % (known font {:>5.1} %)  p95 {:.2}  camera {:.2}  ({:.1} s)",
         point.label,
         point.resolvability,
         point.target_legibility,
+        if point.target_known_font { "read" } else { "not read" },
         100.0 * point.readable_fraction,
+        100.0 * point.known_font_fraction,
         point.p95_legibility,
         point.camera_best,
         point.seconds
@@ -804,13 +824,17 @@ fn pareto_frontier(points: &[SweepPoint]) -> Vec<&SweepPoint> {
 fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
     let mut md = format!(
         "Forward model of the encoders and of every viewer: {optics:?} optics. Resolvability M is the smallest \
-         over the bands (views resolved while M ≥ 1; `eyekey display check`).\n\n"
+         over the bands (views resolved while M ≥ 1; `eyekey display check`). A person reads when their view's \
+         legibility reaches the threshold or the known-font attacker (a matched filter per digit, \
+         `evaluation::known_font`) reads all four digits.\n\n"
     );
     md += &table_header(&[
         "configuration",
         "resolvability M",
         "target legibility",
+        "known-font attacker reads the target",
         "population readable",
+        "read by the known-font attacker",
         "population p95",
         "camera best",
         "seconds",
@@ -818,11 +842,13 @@ fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
     for p in points {
         writeln!(
             md,
-            "| {} | {:.2} | {:.2} | {:.1} % | {:.2} | {:.2} | {:.1} |",
+            "| {} | {:.2} | {:.2} | {} | {:.1} % | {:.1} % | {:.2} | {:.2} | {:.1} |",
             p.label,
             p.resolvability,
             p.target_legibility,
+            if p.target_known_font { "yes" } else { "no" },
             100.0 * p.readable_fraction,
+            100.0 * p.known_font_fraction,
             p.p95_legibility,
             p.camera_best,
             p.seconds

@@ -59,6 +59,16 @@ pub fn evaluate(
     };
     let t_obs = Observer::new(display, target, EyePosition::default(), &topts, options.optics, cache)?;
     let g = t_obs.grid();
+    let mut reference = Reference::new(document, g.width, g.height, level, options.threshold);
+    if let Some(text) = &options.document_text {
+        reference = reference.with_known_font(KnownFontAttacker::new(
+            text,
+            document.width(),
+            document.height(),
+            g.width,
+            g.height,
+        )?);
+    }
     let mut ev = Evaluator {
         display,
         l,
@@ -67,7 +77,7 @@ pub fn evaluate(
         topts,
         cache,
         cancel,
-        reference: Reference::new(document, g.width, g.height, level, options.threshold),
+        reference,
         pictures: Vec::new(),
     };
     let objective = t_obs.objective(document, level);

@@ -29,6 +29,9 @@ pub struct EvaluationOptions {
     pub head_offsets_mm: Vec<f64>,
     /// Population views saved as pictures.
     pub saved_population_views: u32,
+    /// The document's text, font and secret alphabet, when known (a PIN slip eyekey rendered): every view is
+    /// then also read by the known-font attacker.
+    pub document_text: Option<crate::evaluation::DocumentText>,
 }
 
 impl Default for EvaluationOptions {
@@ -44,6 +47,7 @@ impl Default for EvaluationOptions {
             key_directions: 3,
             head_offsets_mm: vec![0.5, 1.0, 2.0, 4.0],
             saved_population_views: 3,
+            document_text: None,
         }
     }
 }

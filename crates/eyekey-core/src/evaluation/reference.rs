@@ -17,6 +17,8 @@ pub struct Reference {
     pub level: f64,
     /// Legibility threshold.
     pub threshold: f64,
+    /// The known-font attacker, when the document's text is known.
+    pub known_font: Option<crate::evaluation::KnownFontAttacker>,
 }
 
 impl Reference {
@@ -29,7 +31,14 @@ impl Reference {
             height: height as usize,
             level,
             threshold,
+            known_font: None,
         }
+    }
+
+    /// The same reference with the known-font attacker reading every view too.
+    pub fn with_known_font(mut self, attacker: crate::evaluation::KnownFontAttacker) -> Self {
+        self.known_font = Some(attacker);
+        self
     }
 
     /// Scores a luminance view; `white_luminance` is the viewer's luminance of the display's full white.
@@ -40,13 +49,16 @@ impl Reference {
             .map(|v| (*v as f64 / white_luminance) as f32)
             .collect();
         let objective: Vec<f32> = self.document.iter().map(|v| (*v as f64 * self.level) as f32).collect();
+        let known_font = self.known_font.as_ref().map(|a| a.read(view_luminance));
+        let read = known_font.as_ref().is_some_and(|k| k.correct);
         ViewScore {
             label: label.to_string(),
             legibility: leg,
             ncc: ncc(view_luminance, &self.document),
             psnr_db: psnr(&norm, &objective, self.level),
             ssim: ssim(&norm, &objective, self.width, self.height, self.level),
-            readable: leg >= self.threshold,
+            known_font,
+            readable: leg >= self.threshold || read,
         }
     }
 

@@ -18,7 +18,10 @@ pub struct ViewScore {
     pub psnr_db: f64,
     /// SSIM of the white-normalised luminance against the objective.
     pub ssim: f64,
-    /// legibility ≥ threshold.
+    /// What the known-font attacker read, when the document's text is known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub known_font: Option<crate::evaluation::KnownFontRead>,
+    /// Legibility ≥ threshold, or the known-font attacker read every secret character.
     pub readable: bool,
 }
 
@@ -32,6 +35,11 @@ pub struct PopulationSummary {
     pub readable_count: u32,
     /// readable_count / count.
     pub readable_fraction: f64,
+    /// 95 % confidence interval of the fraction who read (Wilson score interval).
+    pub readable_ci95: (f64, f64),
+    /// How many the known-font attacker read (when the document's text is known).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub known_font_readers: Option<u32>,
     /// Median legibility.
     pub median_legibility: f64,
     /// 95th-percentile legibility.
@@ -52,10 +60,18 @@ impl PopulationSummary {
         legs.sort_by(|a, b| a.total_cmp(b));
         let readable = scores.iter().filter(|s| s.readable).count() as u32;
         let fraction = |t: f64| legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64;
+        let known_font_readers = scores.iter().any(|s| s.known_font.is_some()).then(|| {
+            scores
+                .iter()
+                .filter(|s| s.known_font.as_ref().is_some_and(|k| k.correct))
+                .count() as u32
+        });
         Self {
             count: scores.len() as u32,
             readable_count: readable,
             readable_fraction: readable as f64 / scores.len().max(1) as f64,
+            readable_ci95: wilson_interval(readable as u64, scores.len() as u64, 1.959_964),
+            known_font_readers,
             median_legibility: percentile(&legs, 0.5),
             p95_legibility: percentile(&legs, 0.95),
             max_legibility: legs.last().copied().unwrap_or(0.0),
@@ -66,6 +82,21 @@ impl PopulationSummary {
             people: scores,
         }
     }
+}
+
+/// The Wilson score interval of a binomial proportion k/n at z standard deviations (Wilson 1927; Brown,
+/// Cai & DasGupta 2001 recommend it over the normal approximation for small k): (p̂ + z²/2n ± z√(p̂(1−p̂)/n +
+/// z²/4n²)) / (1 + z²/n). (0, 1) when n = 0.
+pub fn wilson_interval(k: u64, n: u64, z: f64) -> (f64, f64) {
+    if n == 0 {
+        return (0.0, 1.0);
+    }
+    let (nf, p) = (n as f64, k as f64 / n as f64);
+    let z2 = z * z;
+    let centre = p + z2 / (2.0 * nf);
+    let half = z * (p * (1.0 - p) / nf + z2 / (4.0 * nf * nf)).sqrt();
+    let d = 1.0 + z2 / nf;
+    (((centre - half) / d).max(0.0), ((centre + half) / d).min(1.0))
 }
 
 /// The camera attacker's best case.
@@ -153,7 +184,39 @@ pub enum EvaluationError {
     /// Building an observer failed.
     #[error(transparent)]
     Observer(#[from] crate::physics::observer::ObserverError),
+    /// The document's text hint does not fit the document.
+    #[error("document text: {0}")]
+    DocumentText(#[from] crate::evaluation::KnownFontError),
     /// The cancel flag was raised.
     #[error("cancelled")]
     Cancelled,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against values computed by hand from the formula (and tabulated by Brown, Cai & DasGupta 2001 for
+    /// 5 of 10): 0 of 1000 → (0, 0.00383); 5 of 10 → (0.2366, 0.7634); 147 of 1000 → (0.1264, 0.1703).
+    #[test]
+    fn wilson_intervals_match_hand_values() {
+        let close = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() < 5e-5 && (a.1 - b.1).abs() < 5e-5;
+        let z = 1.959_964;
+        assert!(
+            close(wilson_interval(0, 1000, z), (0.0, 0.003_827)),
+            "{:?}",
+            wilson_interval(0, 1000, z)
+        );
+        assert!(
+            close(wilson_interval(5, 10, z), (0.236_6, 0.763_4)),
+            "{:?}",
+            wilson_interval(5, 10, z)
+        );
+        assert!(
+            close(wilson_interval(147, 1000, z), (0.126_4, 0.170_3)),
+            "{:?}",
+            wilson_interval(147, 1000, z)
+        );
+        assert_eq!(wilson_interval(0, 0, z), (0.0, 1.0));
+    }
 }
