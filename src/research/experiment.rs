@@ -435,7 +435,6 @@ fn sweep_display(views: u32, pitch_mm: f64, distance_mm: f64, holes: u32, bands:
 fn sweep_lenslet(holes: u32, pitch_mm: f64, views: u32, spacing_mm: f64, distance_mm: f64) -> DisplayGeometry {
     let p_s = pitch_mm / views as f64;
     DisplayGeometry {
-        aperture: eyekey_core::physics::display::Aperture::Lenslet,
         holes_x: holes,
         holes_y: holes,
         hole_pitch_mm: pitch_mm,
@@ -445,8 +444,7 @@ fn sweep_lenslet(holes: u32, pitch_mm: f64, views: u32, spacing_mm: f64, distanc
         screen_pixel_pitch_mm: p_s,
         gap_mm: p_s * distance_mm / spacing_mm,
         viewing_distance_mm: distance_mm,
-        projectors: eyekey_core::physics::spectral::paper_projectors(),
-        l_max: 1.0,
+        ..DisplayGeometry::lenslet()
     }
 }
 
@@ -461,7 +459,6 @@ fn sweep_pinhole(
     distance_mm: f64,
 ) -> DisplayGeometry {
     DisplayGeometry {
-        aperture: eyekey_core::physics::display::Aperture::Pinhole,
         holes_x: holes,
         holes_y: holes,
         hole_pitch_mm: pitch_mm,
@@ -471,8 +468,7 @@ fn sweep_pinhole(
         screen_pixel_pitch_mm: pitch_mm / views as f64,
         gap_mm,
         viewing_distance_mm: distance_mm,
-        projectors: eyekey_core::physics::spectral::paper_projectors(),
-        l_max: 1.0,
+        ..DisplayGeometry::pinhole()
     }
 }
 

@@ -28,7 +28,7 @@ use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
-use super::stencil::ViewStencil;
+use super::stencil::{scatter_views, ViewStencil};
 
 /// Transforms of one padded grid size.
 pub(crate) struct FftPlan {
@@ -63,7 +63,7 @@ fn smooth_size(at_least: usize, even: bool) -> usize {
 
 /// The padded size along one axis: `extent` retinal pixels, samples every `k`, taps at offsets
 /// [lo, hi] (see the module's bound).
-pub(crate) fn padded_size(extent: usize, k: usize, lo: i64, hi: i64, even: bool) -> usize {
+fn padded_size(extent: usize, k: usize, lo: i64, hi: i64, even: bool) -> usize {
     let e = extent as i64;
     let need = (e - k as i64 + hi + 1).max(e - lo).max(e);
     smooth_size(need as usize, even)
@@ -142,6 +142,20 @@ struct Scratch {
     spec: Vec<Complex32>,
 }
 
+/// The zero-padded grid (P, Q) on which the FFT products of `views` over holes.0 × holes.1 holes, k retinal
+/// pixels per hole, equal the linear convolution (the module's bound); planning nothing.
+pub(crate) fn grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) -> (usize, usize) {
+    let nonempty = || views.iter().filter(|v| v.width > 0);
+    let lo_x = nonempty().map(|v| v.x0).min().unwrap_or(0);
+    let hi_x = nonempty().map(|v| v.x0 + v.width as i64 - 1).max().unwrap_or(0);
+    let lo_y = nonempty().map(|v| v.y0).min().unwrap_or(0);
+    let hi_y = nonempty().map(|v| v.y0 + v.height as i64 - 1).max().unwrap_or(0);
+    (
+        padded_size(holes.0 * k, k, lo_x, hi_x, true),
+        padded_size(holes.1 * k, k, lo_y, hi_y, false),
+    )
+}
+
 /// The kernels of one band (weights and each derivative term) as spectra on a padded grid.
 pub(crate) struct FftKernels {
     plan: FftPlan,
@@ -172,14 +186,7 @@ impl FftKernels {
         n_terms: usize,
         deferred: bool,
     ) -> Self {
-        let (w, h) = (holes.0 * k, holes.1 * k);
-        let nonempty = || views.iter().filter(|v| v.width > 0);
-        let lo_x = nonempty().map(|v| v.x0).min().unwrap_or(0);
-        let hi_x = nonempty().map(|v| v.x0 + v.width as i64 - 1).max().unwrap_or(0);
-        let lo_y = nonempty().map(|v| v.y0).min().unwrap_or(0);
-        let hi_y = nonempty().map(|v| v.y0 + v.height as i64 - 1).max().unwrap_or(0);
-        let p = padded_size(w, k, lo_x, hi_x, true);
-        let q = padded_size(h, k, lo_y, hi_y, false);
+        let (p, q) = grid_size(views, holes, k);
         Self {
             plan: FftPlan::new(p, q),
             holes_x: holes.0,
@@ -198,11 +205,6 @@ impl FftKernels {
     pub(crate) fn takes(&self, term: Option<usize>) -> bool {
         let calls = &self.calls[term.map_or(0, |t| t + 1)];
         !self.deferred || calls.fetch_add(1, Ordering::Relaxed) >= 1
-    }
-
-    /// The padded grid, P × Q.
-    pub(crate) fn size(&self) -> (usize, usize) {
-        (self.plan.p, self.plan.q)
     }
 
     /// Bytes of the spectra computed so far.
@@ -263,7 +265,7 @@ impl FftKernels {
         let (p, q, k) = (plan.p, plan.q, self.k);
         let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
         let frame_w = nx * nu;
-        let total = (0..nu * nv)
+        let mut total = (0..nu * nv)
             .into_par_iter()
             .fold(
                 || (plan.scratch(), vec![Complex32::default(); plan.h * q]),
@@ -295,7 +297,6 @@ impl FftKernels {
                     a
                 },
             );
-        let mut total = total;
         let mut s = plan.scratch();
         let mut img = vec![0f32; p * q];
         let (w, h) = (nx * k, ny * k);
@@ -339,37 +340,26 @@ impl FftKernels {
         let mut y_spec = vec![Complex32::default(); plan.h * q];
         plan.forward(&mut img, 0..h, &mut y_spec, &mut s);
         // Per view: the correlation, sampled at the holes.
-        let planes: Vec<Vec<f32>> = (0..nu * nv)
-            .into_par_iter()
-            .map_init(
-                || plan.scratch(),
-                |s, v| {
-                    let mut spec = std::mem::take(&mut s.spec);
-                    for ((z, yz), kz) in spec.iter_mut().zip(&y_spec).zip(&kernels[v]) {
-                        *z = yz * kz.conj();
-                    }
-                    let mut img = std::mem::take(&mut s.img);
-                    plan.inverse(&mut spec, (0..ny).map(|yy| yy * k), &mut img, s);
-                    let plane: Vec<f32> = (0..ny)
-                        .flat_map(|yy| (0..nx).map(move |x| (yy, x)))
-                        .map(|(yy, x)| img[yy * k * p + x * k])
-                        .collect();
-                    s.img = img;
-                    s.spec = spec;
-                    plane
-                },
-            )
-            .collect();
-        let frame_w = nx * nu;
-        out.par_chunks_mut(frame_w * n_bands)
-            .enumerate()
-            .for_each(|(row, dst)| {
-                let (yy, j) = (row / nv, row % nv);
-                for col in 0..frame_w {
-                    let (x, i) = (col / nu, col % nu);
-                    dst[col * n_bands + band] = planes[j * nu + i][yy * nx + x];
+        let mut planes = vec![0f32; nu * nv * ny * nx];
+        planes.par_chunks_mut(ny * nx).enumerate().for_each_init(
+            || plan.scratch(),
+            |s, (v, plane)| {
+                let mut spec = std::mem::take(&mut s.spec);
+                for ((z, yz), kz) in spec.iter_mut().zip(&y_spec).zip(&kernels[v]) {
+                    *z = yz * kz.conj();
                 }
-            });
+                let mut img = std::mem::take(&mut s.img);
+                plan.inverse(&mut spec, (0..ny).map(|yy| yy * k), &mut img, s);
+                for (r, row) in plane.chunks_exact_mut(nx).enumerate() {
+                    for (x, slot) in row.iter_mut().enumerate() {
+                        *slot = img[r * k * p + x * k];
+                    }
+                }
+                s.img = img;
+                s.spec = spec;
+            },
+        );
+        scatter_views(out, &planes, nx, (nx, ny), (nu, nv), n_bands, band);
     }
 }
 

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::fft::{fft_is_cheaper, FftKernels};
+use super::fft::{fft_is_cheaper, grid_size, FftKernels};
 use crate::physics::display::DisplayGeometry;
 
 /// One view's kernel: a dense box of weights (and of ∂/∂W_j per term) over retinal offsets
@@ -439,14 +439,9 @@ impl StencilOperator {
 
     /// Uses the FFT products when [`fft_is_cheaper`] says so for these kernels.
     fn choose_method(&mut self) {
-        let kernels = self.fft_kernels(true);
-        let (p, q) = kernels.size();
-        let method = if fft_is_cheaper(self.nnz(), self.n_views(), p, q) {
-            ProductMethod::Fft
-        } else {
-            ProductMethod::Stencil
-        };
-        self.fft = FftSlot((method == ProductMethod::Fft).then(|| Arc::new(kernels)));
+        let (p, q) = grid_size(&self.views, (self.holes_x, self.holes_y), self.k);
+        let fft = fft_is_cheaper(self.nnz(), self.n_views(), p, q);
+        self.fft = FftSlot(fft.then(|| Arc::new(self.fft_kernels(true))));
     }
 
     /// The FFT form of the kernels; `deferred`: each term's first product still runs by stencils.
@@ -681,17 +676,31 @@ impl StencilOperator {
             .par_chunks_mut(nx_blocks)
             .enumerate()
             .for_each(|(row, dst)| pass.adjoint_row(row, dst));
-        let frame_w = nx * nu;
-        out.par_chunks_mut(frame_w * n_bands)
-            .enumerate()
-            .for_each(|(row, dst)| {
-                let (yy, j) = (row / self.views_v, row % self.views_v);
-                for col in 0..frame_w {
-                    let (x, i) = (col / nu, col % nu);
-                    dst[col * n_bands + band] = planes[((j * nu + i) * ny + yy) * nx_blocks + x];
-                }
-            });
+        scatter_views(out, &planes, nx_blocks, (nx, ny), (nu, self.views_v), n_bands, band);
     }
+}
+
+/// Writes band `band` of the light field `out` from per-view planes: sample (x, y; view j·U + i) takes
+/// `planes[((j·U + i)·ny + y)·stride + x]`; the other bands' entries are left as they are.
+pub(crate) fn scatter_views(
+    out: &mut [f32],
+    planes: &[f32],
+    stride: usize,
+    (nx, ny): (usize, usize),
+    (nu, nv): (usize, usize),
+    n_bands: usize,
+    band: usize,
+) {
+    let frame_w = nx * nu;
+    out.par_chunks_mut(frame_w * n_bands)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let (yy, j) = (row / nv, row % nv);
+            for col in 0..frame_w {
+                let (x, i) = (col / nu, col % nu);
+                dst[col * n_bands + band] = planes[((j * nu + i) * ny + yy) * stride + x];
+            }
+        });
 }
 
 #[cfg(test)]
