@@ -170,7 +170,7 @@ def logistic_fit(x, y, iters=100):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("views", help="directory with views.csv and view_<k>.png")
-    ap.add_argument("--out", default="docs/legibility-calibration.md")
+    ap.add_argument("--out", default="docs/legibility-ocr.md")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--command", default="bash benches/calibrate_ocr.sh")
     ap.add_argument("--generate-seconds", type=float, default=float("nan"))

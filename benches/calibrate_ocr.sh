@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# Calibrates the legibility threshold (src/evaluate.rs DEFAULT_THRESHOLD) against OCR.
+# Calibrates the legibility threshold against OCR, the second attacker (docs/legibility-ocr.md); the known-font
+# calibration itself (docs/legibility-calibration.md) comes from `eyekey experiment calibrate` alone.
 #
 #   bash benches/calibrate_ocr.sh [COUNT] [SEED]
 #
 # Installs tesseract (Debian package tesseract-ocr) if missing and a Python venv with Pillow and NumPy at
 # benches/.venv, builds the release binary, writes COUNT simulated views with known PINs
-# (`eyekey experiment calibrate`), OCRs each like an attacker would and writes docs/legibility-calibration.md.
+# (`eyekey experiment calibrate`), OCRs each like an attacker would and writes docs/legibility-ocr.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -36,7 +37,7 @@ SECONDS=0
 GEN=$SECONDS
 
 "$VENV/bin/python" benches/calibrate_ocr.py "$OUT" \
-    --out docs/legibility-calibration.md \
+    --out docs/legibility-ocr.md \
     --jobs "$JOBS" \
     --generate-seconds "$GEN" \
     --command "bash benches/calibrate_ocr.sh $COUNT $SEED"

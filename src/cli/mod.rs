@@ -99,6 +99,19 @@ pub enum ExperimentCommand {
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
     },
+    /// A PIN slip on the wave sweep's lenslet baseline, looked at by people and a focus-sweeping camera from a
+    /// grid of positions beside, above, nearer and farther than the target.
+    Bystanders {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/bystanders")]
+        out: PathBuf,
+        /// People sampled at every position.
+        #[arg(long, default_value_t = 6)]
+        people: u32,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 200)]
+        max_iterations: u32,
+    },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
         /// Output directory (bundle/ and evaluation/).
@@ -120,10 +133,10 @@ pub enum ExperimentCommand {
         #[arg(long)]
         fourier: bool,
     },
-    /// Simulated views with known text and their legibility, for calibrating the threshold against OCR
-    /// (`benches/calibrate_ocr.sh`).
+    /// Simulated views with known text, their legibility and the known-font attacker's readings, for
+    /// calibrating the threshold (calibration.md; `benches/calibrate_ocr.sh` adds OCR).
     Calibrate {
-        /// Output directory (view_<k>.png and views.csv).
+        /// Output directory (view_<k>.png, views.csv, calibration.md).
         #[arg(long, default_value = "target/calibration")]
         out: PathBuf,
         /// Number of views.
@@ -428,6 +441,13 @@ pub fn run(cli: Cli) -> Result<()> {
                 crate::research::experiment::sweep(&out, population, max_iterations, optics)?.0
             );
         }
+        Command::Experiment(ExperimentCommand::Bystanders {
+            out,
+            people,
+            max_iterations,
+        }) => {
+            print!("{}", crate::research::bystanders::run(&out, people, max_iterations)?);
+        }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
         }
@@ -439,8 +459,11 @@ pub fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::Experiment(ExperimentCommand::Calibrate { out, count, seed }) => {
-            crate::research::calibration::calibration_views(&out, count, seed)?;
-            println!("wrote {count} views and views.csv to {}", out.display());
+            print!(
+                "{}",
+                crate::research::calibration::calibration_views(&out, count, seed)?
+            );
+            println!("wrote {count} views, views.csv and calibration.md to {}", out.display());
         }
     }
     Ok(())

@@ -1,4 +1,5 @@
-//! Views for calibrating the legibility threshold against OCR (`eyekey experiment calibrate`).
+//! Views for calibrating the legibility threshold against the known-font attacker and OCR
+//! (`eyekey experiment calibrate`).
 //!
 //! Every view shows a random 4-digit PIN and spans the range from plainly legible to unreadable:
 //!
@@ -8,9 +9,12 @@
 //!   decoys of weight 0.1, 0.3 or 1.0, seen by its target, by people sampled from the population statistics,
 //!   and by an ideal camera-like eye (standard cones, 4 mm aperture) focused within ±1 D.
 //!
-//! Each view is scored with [`eyekey_core::evaluation::Reference::score`] (legibility and plain NCC) and written as
-//! the picture an attacker would start from: luminance stretched to 0..255, upscaled ×4 (bilinear), 8-bit
-//! grey. `views.csv` lists `file,text,legibility,ncc,kind`; `benches/calibrate_ocr.sh` OCRs them.
+//! Each view is scored with [`eyekey_core::evaluation::Reference::score`] (legibility and plain NCC), read by the
+//! known-font attacker ([`eyekey_core::evaluation::KnownFontAttacker`]) and written as the picture an attacker
+//! would start from: luminance stretched to 0..255, upscaled ×4 (bilinear), 8-bit grey. `views.csv` lists
+//! `file,text,legibility,ncc,known_font,characters_right,kind`; `calibration.md` tabulates the known-font
+//! attacker's reads against legibility and chooses the threshold ([`known_font_table`]);
+//! `benches/calibrate_ocr.sh` OCRs the same views.
 
 use eyekey_core::physics::transport::TransportCache;
 use std::fmt::Write as _;
@@ -23,7 +27,9 @@ use image::{GrayImage, Luma, RgbImage};
 use rand::{Rng, SeedableRng};
 
 use eyekey_core::encoding::pipeline::{encode, DecoyKind, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
-use eyekey_core::evaluation::{luminance, stretch_to_unit, Reference, DEFAULT_THRESHOLD};
+use eyekey_core::evaluation::{
+    luminance, stretch_to_unit, DocumentText, KnownFontAttacker, Reference, DEFAULT_THRESHOLD,
+};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::population::{sample_person, SamplingScope};
@@ -38,6 +44,8 @@ pub const UPSCALE: u32 = 4;
 #[derive(Clone, Debug)]
 struct Setup {
     display: DisplayGeometry,
+    /// The forward model of the encodings and the views.
+    optics: Optics,
     /// Sub-rays of the encoder's operators.
     sub_rays: u32,
     /// Sub-rays of the viewers' operators (with their own jitter seed).
@@ -58,13 +66,14 @@ struct Setup {
 impl Setup {
     fn standard() -> Self {
         Self {
-            // 56×56 holes: a line of four 5×7 digits at two pixels per font dot (48 pixels) fits with a margin.
+            // 56×56 lenslets: a line of four 5×7 digits at two pixels per font dot (48 pixels) fits with a
+            // margin. The lenslet optics resolve their views under diffraction (docs/design.md §2.7).
             display: DisplayGeometry {
-                aperture: Default::default(),
                 holes_x: 56,
                 holes_y: 56,
-                ..DisplayGeometry::secure()
+                ..DisplayGeometry::lenslet()
             },
+            optics: Optics::Wave,
             sub_rays: 8,
             view_sub_rays: 12,
             max_iterations: 100,
@@ -83,8 +92,9 @@ pub fn pin_document(pin: &str, width: u32, height: u32, scale: u32) -> RgbImage 
     eyekey_core::imaging::glyphs::render_text(&[pin], width, height, scale)
 }
 
-/// Writes `count` views with known text and their legibility into `out_dir` (`view_<k>.png`, `views.csv`).
-pub fn calibration_views(out_dir: &Path, count: usize, seed: u64) -> Result<()> {
+/// Writes `count` views with known text, their legibility and the known-font attacker's readings into
+/// `out_dir` (`view_<k>.png`, `views.csv`, `calibration.md`); returns the calibration table.
+pub fn calibration_views(out_dir: &Path, count: usize, seed: u64) -> Result<String> {
     views_with(out_dir, count, seed, &Setup::standard())
 }
 
@@ -92,6 +102,10 @@ struct View {
     text: String,
     legibility: f64,
     ncc: f64,
+    /// The known-font attacker read every digit right.
+    known_font: bool,
+    /// Digits the known-font attacker got right.
+    characters_right: u32,
     kind: String,
     luminance: Vec<f32>,
 }
@@ -124,6 +138,8 @@ struct ViewWriter<'a> {
     /// Views written so far.
     written: usize,
     csv: String,
+    /// Each view's (legibility, known-font read, digits right, kind's first word).
+    rows: Vec<CalibrationRow>,
 }
 
 impl<'a> ViewWriter<'a> {
@@ -133,7 +149,8 @@ impl<'a> ViewWriter<'a> {
             width,
             height,
             written: 0,
-            csv: String::from("file,text,legibility,ncc,kind\n"),
+            csv: String::from("file,text,legibility,ncc,known_font,characters_right,kind\n"),
+            rows: Vec::new(),
         }
     }
 
@@ -145,27 +162,53 @@ impl<'a> ViewWriter<'a> {
             .with_context(|| format!("writing {file}"))?;
         writeln!(
             self.csv,
-            "{file},{},{:.6},{:.6},{}",
-            v.text, v.legibility, v.ncc, v.kind
+            "{file},{},{:.6},{:.6},{},{},{}",
+            v.text, v.legibility, v.ncc, v.known_font, v.characters_right, v.kind
         )?;
+        self.rows.push(CalibrationRow {
+            legibility: v.legibility,
+            read: v.known_font,
+            characters_right: v.characters_right,
+            kind: v.kind.split(' ').next().unwrap_or("").to_string(),
+        });
         self.written += 1;
         Ok(())
     }
 
-    /// Writes `views.csv`.
-    fn finish(self) -> Result<()> {
-        std::fs::write(self.out_dir.join("views.csv"), self.csv).context("writing views.csv")
+    /// Writes `views.csv` and `calibration.md`; returns the calibration table.
+    fn finish(self) -> Result<String> {
+        std::fs::write(self.out_dir.join("views.csv"), self.csv).context("writing views.csv")?;
+        let md = known_font_table(&self.rows)?;
+        std::fs::write(self.out_dir.join("calibration.md"), &md).context("writing calibration.md")?;
+        Ok(md)
     }
 }
 
-/// Scores what observer `o` sees of light field `l` against `doc`: (legibility, NCC, the view's luminance).
-fn score(doc: &RgbImage, o: &Observer, l: &[f32]) -> (f64, f64, Vec<f32>) {
+/// Scores what observer `o` sees of light field `l` against `doc`, the PIN `pin` drawn at `scale` pixels per
+/// font dot: legibility, NCC and the known-font attacker's reading.
+fn score(doc: &RgbImage, pin: &str, scale: u32, o: &Observer, l: &[f32], kind: String) -> Result<View> {
     let g = o.grid();
-    let reference = Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+    let text = DocumentText {
+        lines: vec![pin.to_string()],
+        scale,
+        alphabet: "0123456789".into(),
+    };
+    let attacker = KnownFontAttacker::new(&text, doc.width(), doc.height(), g.width, g.height)?;
+    let reference =
+        Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD).with_known_font(attacker);
     let lum = luminance(&o.view(l));
     let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
     let s = reference.score("", &lum, white);
-    (s.legibility, s.ncc, lum)
+    let read = s.known_font.expect("the reference has a known-font attacker");
+    Ok(View {
+        text: pin.to_string(),
+        legibility: s.legibility,
+        ncc: s.ncc,
+        known_font: read.correct,
+        characters_right: read.characters_right,
+        kind,
+        luminance: lum,
+    })
 }
 
 /// What every view of one calibration run shares.
@@ -232,7 +275,7 @@ impl<'a> Views<'a> {
             person,
             EyePosition::default(),
             &self.topts,
-            Optics::Geometric,
+            self.setup.optics,
             &self.cache,
         )?)
     }
@@ -252,18 +295,11 @@ impl<'a> Views<'a> {
             axis_deg: 0.0,
         });
         let o = self.observer(&person)?;
-        let (legibility, ncc, luminance) = score(&doc, &o, &plain_light_field_for_image(d, &doc));
         let kind = format!(
             "plain defocus={defocus:+.2}D pupil={:.1}mm scale={scale}",
             person.pupil_diameter_mm
         );
-        Ok(View {
-            text: pin,
-            legibility,
-            ncc,
-            kind,
-            luminance,
-        })
+        score(&doc, &pin, scale, &o, &plain_light_field_for_image(d, &doc), kind)
     }
 
     /// Encodes document `doc` for `target` with `decoys` noise decoys of `weight` (view set `e`).
@@ -279,6 +315,7 @@ impl<'a> Views<'a> {
                 population_decoys: decoys,
                 decoy: DecoyKind::Noise,
                 decoy_weight: weight,
+                optics: self.setup.optics,
                 seed: self.seed.wrapping_mul(1000).wrapping_add(e as u64),
                 sub_rays: self.setup.sub_rays,
                 max_iterations: self.setup.max_iterations,
@@ -343,16 +380,9 @@ impl<'a> Views<'a> {
             if out.written >= count {
                 break;
             }
-            let (legibility, ncc, luminance) = score(&doc, &o, &l);
-            legs.push(legibility);
-            let text = pin.clone();
-            out.push(View {
-                text,
-                legibility,
-                ncc,
-                kind,
-                luminance,
-            })?;
+            let v = score(&doc, &pin, scale, &o, &l, kind)?;
+            legs.push(v.legibility);
+            out.push(v)?;
         }
         eprintln!(
             "view set {e}: {tag}: target {:.2}, others {} ({:.1} s; {} views, {:.0} s total)",
@@ -372,7 +402,7 @@ impl<'a> Views<'a> {
 
 /// Writes `count` views with `setup`: a quarter plain (when `count` ≥ 2), the rest of encodings, view set
 /// after view set.
-fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<()> {
+fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<String> {
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let views = Views::new(setup, seed, &mut rng);
@@ -387,6 +417,163 @@ fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<
         e += 1;
     }
     out.finish()
+}
+
+/// One calibration view as the table sees it.
+#[derive(Clone, Debug)]
+struct CalibrationRow {
+    legibility: f64,
+    /// The known-font attacker read every digit.
+    read: bool,
+    characters_right: u32,
+    /// `plain`, `target`, `person` or `camera`.
+    kind: String,
+}
+
+/// Maximum-likelihood logistic fit P(read) = 1/(1 + exp(−(a + b·legibility))) by Newton's method (the
+/// log-likelihood is concave, so Newton converges from zero); `None` when the reads are separable or absent.
+fn logistic_fit(rows: &[CalibrationRow]) -> Option<(f64, f64)> {
+    let (mut a, mut b) = (0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let (mut ga, mut gb, mut haa, mut hab, mut hbb) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for r in rows {
+            let p = 1.0 / (1.0 + (-(a + b * r.legibility)).exp());
+            let y = if r.read { 1.0 } else { 0.0 };
+            let w = p * (1.0 - p);
+            ga += y - p;
+            gb += (y - p) * r.legibility;
+            haa += w;
+            hab += w * r.legibility;
+            hbb += w * r.legibility * r.legibility;
+        }
+        let det = haa * hbb - hab * hab;
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let (da, db) = ((hbb * ga - hab * gb) / det, (haa * gb - hab * ga) / det);
+        a += da;
+        b += db;
+        if !(a.is_finite() && b.is_finite()) || b.abs() > 1e3 {
+            return None;
+        }
+        if da.abs() + db.abs() < 1e-10 {
+            return Some((a, b));
+        }
+    }
+    None
+}
+
+/// The calibration table: the known-font attacker's reads per legibility bin, the logistic fit, the error rates
+/// of candidate thresholds and the threshold this calibration supports: the lowest legibility at which the
+/// attacker read any view, rounded down to 0.01 (a secrecy judge errs towards *readable*).
+fn known_font_table(rows: &[CalibrationRow]) -> Result<String> {
+    let mut md = String::new();
+    writeln!(
+        md,
+        "| legibility | views | read by the known-font attacker | success | mean digits right | views (read) by kind |"
+    )?;
+    writeln!(md, "| --- | --- | --- | --- | --- | --- |")?;
+    for bin in 0..10 {
+        let (lo, hi) = (bin as f64 / 10.0, (bin + 1) as f64 / 10.0);
+        let in_bin: Vec<&CalibrationRow> = rows
+            .iter()
+            .filter(|r| r.legibility >= lo && (r.legibility < hi || (bin == 9 && r.legibility <= 1.0)))
+            .collect();
+        if in_bin.is_empty() {
+            continue;
+        }
+        let read = in_bin.iter().filter(|r| r.read).count();
+        let digits = in_bin.iter().map(|r| r.characters_right as f64).sum::<f64>() / in_bin.len() as f64;
+        let mut kinds: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
+        for r in &in_bin {
+            let e = kinds.entry(r.kind.as_str()).or_default();
+            e.0 += 1;
+            e.1 += usize::from(r.read);
+        }
+        let kinds: Vec<String> = kinds.iter().map(|(k, (n, r))| format!("{k} {n} ({r})")).collect();
+        writeln!(
+            md,
+            "| {lo:.1}–{hi:.1} | {} | {read} | {:.0} % | {digits:.1} | {} |",
+            in_bin.len(),
+            100.0 * read as f64 / in_bin.len() as f64,
+            kinds.join(", ")
+        )?;
+    }
+    let lowest = rows
+        .iter()
+        .filter(|r| r.read)
+        .map(|r| r.legibility)
+        .fold(f64::INFINITY, f64::min);
+    let highest_missed = rows
+        .iter()
+        .filter(|r| !r.read)
+        .map(|r| r.legibility)
+        .fold(f64::NEG_INFINITY, f64::max);
+    writeln!(md)?;
+    if lowest.is_finite() {
+        writeln!(
+            md,
+            "- Lowest legibility at which the known-font attacker read a view: **{lowest:.3}**."
+        )?;
+    } else {
+        writeln!(md, "- The known-font attacker read no view.")?;
+    }
+    if highest_missed.is_finite() {
+        writeln!(
+            md,
+            "- Highest legibility of a view it could not read: {highest_missed:.3}."
+        )?;
+    }
+    if let Some((a, b)) = logistic_fit(rows) {
+        let at = |p: f64| ((p / (1.0 - p)).ln() - a) / b;
+        writeln!(
+            md,
+            "- Logistic fit P(read) = 1/(1+exp(−({a:.2} + {b:.2}·legibility))): 10 % at {:.3}, **50 % at {:.3}**, 90 % at {:.3}.",
+            at(0.1),
+            at(0.5),
+            at(0.9)
+        )?;
+    }
+    writeln!(md)?;
+    writeln!(
+        md,
+        "| threshold | views below | of them read (false negatives) | views at or above | of them not read (false positives) |"
+    )?;
+    writeln!(md, "| --- | --- | --- | --- | --- |")?;
+    let chosen = if lowest.is_finite() {
+        (lowest * 100.0).floor() / 100.0
+    } else {
+        1.0
+    };
+    let mut candidates = vec![0.1, 0.2, 0.3, 0.38, 0.4, 0.5, 0.6, 0.7, chosen];
+    candidates.sort_by(f64::total_cmp);
+    candidates.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    for t in candidates {
+        let below: Vec<&CalibrationRow> = rows.iter().filter(|r| r.legibility < t).collect();
+        let above: Vec<&CalibrationRow> = rows.iter().filter(|r| r.legibility >= t).collect();
+        let fneg = below.iter().filter(|r| r.read).count();
+        let fpos = above.iter().filter(|r| !r.read).count();
+        let pct = |k: usize, n: usize| if n == 0 { 0.0 } else { 100.0 * k as f64 / n as f64 };
+        let label = if (t - chosen).abs() < 1e-9 {
+            format!("{t:.2} (supported)")
+        } else {
+            format!("{t:.2}")
+        };
+        writeln!(
+            md,
+            "| {label} | {} | {fneg} ({:.1} %) | {} | {fpos} ({:.1} %) |",
+            below.len(),
+            pct(fneg, below.len()),
+            above.len(),
+            pct(fpos, above.len())
+        )?;
+    }
+    writeln!(md)?;
+    writeln!(
+        md,
+        "Threshold this calibration supports: **{chosen:.2}** (the lowest legibility at which the known-font attacker read a view, rounded down to 0.01); the evaluation's `DEFAULT_THRESHOLD` is {DEFAULT_THRESHOLD}."
+    )?;
+    Ok(md)
 }
 
 fn gcd(a: usize, b: usize) -> usize {
@@ -405,10 +592,11 @@ mod tests {
     fn writes_views_and_a_parseable_table() {
         let dir = tempfile::tempdir().unwrap();
         let setup = Setup {
+            optics: Optics::Geometric,
             display: DisplayGeometry {
                 aperture: Default::default(),
-                holes_x: 24,
-                holes_y: 24,
+                holes_x: 28,
+                holes_y: 28,
                 views_u: 3,
                 views_v: 3,
                 ..DisplayGeometry::paper()
@@ -422,27 +610,71 @@ mod tests {
             cameras_per_encoding: 1,
             pool: 2,
         };
-        views_with(dir.path(), 6, 1, &setup).unwrap();
+        let md = views_with(dir.path(), 6, 1, &setup).unwrap();
+        assert!(md.contains("| legibility | views |"), "{md}");
+        assert_eq!(md, std::fs::read_to_string(dir.path().join("calibration.md")).unwrap());
         let csv = std::fs::read_to_string(dir.path().join("views.csv")).unwrap();
         let mut lines = csv.lines();
-        assert_eq!(lines.next(), Some("file,text,legibility,ncc,kind"));
+        assert_eq!(
+            lines.next(),
+            Some("file,text,legibility,ncc,known_font,characters_right,kind")
+        );
         let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
         assert_eq!(rows.len(), 6);
         let mut kinds = std::collections::BTreeSet::new();
         for r in &rows {
-            assert_eq!(r.len(), 5, "{r:?}");
+            assert_eq!(r.len(), 7, "{r:?}");
             assert!(r[1].len() == 4 && r[1].chars().all(|c| c.is_ascii_digit()), "{r:?}");
             let leg: f64 = r[2].parse().unwrap();
             let ncc: f64 = r[3].parse().unwrap();
             assert!((0.0..=1.0).contains(&leg) && leg + 1e-9 >= ncc.abs(), "{r:?}");
-            kinds.insert(r[4].split(' ').next().unwrap().to_string());
+            let read: bool = r[4].parse().unwrap();
+            let right: u32 = r[5].parse().unwrap();
+            assert!(right <= 4 && (right == 4) == read, "{r:?}");
+            kinds.insert(r[6].split(' ').next().unwrap().to_string());
             let img = image::open(dir.path().join(r[0])).unwrap().to_luma8();
-            assert_eq!(img.dimensions(), (24 * UPSCALE, 24 * UPSCALE));
+            assert_eq!(img.dimensions(), (28 * UPSCALE, 28 * UPSCALE));
         }
         assert!(kinds.contains("plain") && kinds.contains("target"), "{kinds:?}");
         // A sharp plain view of the document is legible.
         let doc = pin_document("4821", 24, 24, 1);
         let lum = eyekey_core::evaluation::image_luminance(&doc);
         assert!(eyekey_core::evaluation::legibility(&lum, &lum, 24, 24) > 0.99);
+    }
+
+    fn row(legibility: f64, read: bool) -> CalibrationRow {
+        CalibrationRow {
+            legibility,
+            read,
+            characters_right: if read { 4 } else { 1 },
+            kind: "person".into(),
+        }
+    }
+
+    #[test]
+    fn logistic_fit_matches_the_saturated_model_by_hand() {
+        // Two legibility levels with 1 of 4 and 3 of 4 read: the two-parameter fit reproduces both rates, so
+        // a = logit(1/4) = −ln 3 and a + b = logit(3/4) = ln 3.
+        let rows: Vec<CalibrationRow> = [(0.0, 1), (1.0, 3)]
+            .iter()
+            .flat_map(|&(x, k)| (0..4).map(move |i| row(x, i < k)))
+            .collect();
+        let (a, b) = logistic_fit(&rows).unwrap();
+        assert!((a + 3f64.ln()).abs() < 1e-8, "{a}");
+        assert!((b - 2.0 * 3f64.ln()).abs() < 1e-8, "{b}");
+        // Perfectly separated reads have no finite maximum.
+        assert!(logistic_fit(&[row(0.1, false), row(0.9, true)]).is_none());
+    }
+
+    #[test]
+    fn the_supported_threshold_is_the_lowest_legibility_read() {
+        let rows = vec![row(0.1, false), row(0.27, true), row(0.5, false), row(0.8, true)];
+        let md = known_font_table(&rows).unwrap();
+        assert!(md.contains("supports: **0.27**"), "{md}");
+        assert!(
+            md.contains("| 0.27 (supported) | 1 | 0 (0.0 %) | 3 | 1 (33.3 %) |"),
+            "{md}"
+        );
+        assert!(md.contains("| 0.30 | 2 | 1 (50.0 %) | 2 | 1 (50.0 %) |"), "{md}");
     }
 }

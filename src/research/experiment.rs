@@ -432,7 +432,13 @@ fn sweep_display(views: u32, pitch_mm: f64, distance_mm: f64, holes: u32, bands:
 
 /// A lenslet display for the wave sweep: `holes`² square lenslets of side and aperture `pitch_mm`, `views`² views `spacing_mm` apart at `distance_mm`; the focal length follows,
 /// f = p_s·d/s with p_s = pitch/views.
-fn sweep_lenslet(holes: u32, pitch_mm: f64, views: u32, spacing_mm: f64, distance_mm: f64) -> DisplayGeometry {
+pub(crate) fn sweep_lenslet(
+    holes: u32,
+    pitch_mm: f64,
+    views: u32,
+    spacing_mm: f64,
+    distance_mm: f64,
+) -> DisplayGeometry {
     let p_s = pitch_mm / views as f64;
     DisplayGeometry {
         holes_x: holes,

@@ -2,6 +2,7 @@
 //! BENCHMARKS.md, docs/experiments.md and docs/legibility-calibration.md.
 
 pub mod bench;
+pub mod bystanders;
 pub mod calibration;
 pub mod experiment;
 pub mod wave;

@@ -300,28 +300,28 @@ mod tests {
     }
 
     /// Views below the legibility threshold that the matched filter reads: the document under Gaussian noise of
-    /// standard deviation 3 (its luminance contrast is 1) on a 128² grid scores legibility ≈ 0.31, under the
-    /// threshold of 0.38, while a cell of ~860 pixels averages the noise down to ~3/√860 ≈ 0.1 of its
-    /// correlation: the attacker reads several of 20 such views (8 with this seed). Pure noise is read right
-    /// only at about chance (10⁻⁴): 0 of 200 noise views.
+    /// standard deviation 5.5 (its luminance contrast is 1) on a 128² grid scores legibility ≈ 0.24, under the
+    /// threshold of 0.26, while a cell of ~860 pixels averages the noise down to ~5.5/√860 ≈ 0.19 of its
+    /// correlation: the attacker reads some of 40 such views (2 with this seed), where guessing would read one
+    /// in 10⁴. Pure noise is read right only at about chance: 0 of 200 noise views.
     #[test]
     fn reads_views_below_the_legibility_threshold_but_not_noise_alone() {
         let (text, doc) = pin("4821");
         let a = KnownFontAttacker::new(&text, 128, 128, 128, 128).unwrap();
         let clean = view_of(&doc, 128);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let normal = Normal::new(0.0f32, 3.0).unwrap();
+        let normal = Normal::new(0.0f32, 5.5).unwrap();
         let (mut read, mut legibility) = (0, 0.0);
-        for _ in 0..20 {
+        for _ in 0..40 {
             let noisy: Vec<f32> = clean.iter().map(|v| v + normal.sample(&mut rng)).collect();
-            legibility += crate::evaluation::legibility(&noisy, &clean, 128, 128) / 20.0;
+            legibility += crate::evaluation::legibility(&noisy, &clean, 128, 128) / 40.0;
             read += a.read(&noisy).correct as u32;
         }
         assert!(
             legibility < crate::evaluation::DEFAULT_THRESHOLD,
             "mean legibility {legibility}"
         );
-        assert!(read >= 5, "read {read} of 20");
+        assert!(read >= 1, "read {read} of 40");
         let unit = Normal::new(0.0f32, 1.0).unwrap();
         let right = (0..200)
             .filter(|_| {

@@ -9,6 +9,7 @@
 //! look good merely by fitting the sampling pattern of its own transport operator.
 
 pub mod attackers;
+mod bystanders;
 mod contact_sheet;
 mod key_sensitivity;
 mod known_font;
@@ -18,6 +19,7 @@ mod reference;
 mod report;
 
 use attackers::*;
+pub use bystanders::{unwarp, BystanderOptions, BystanderPosition, BystanderSummary};
 pub use contact_sheet::contact_sheet;
 use key_sensitivity::*;
 pub use known_font::{DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
@@ -35,7 +37,7 @@ use crate::physics::observer::{transports, Lens, Observer};
 use crate::physics::population::{sample_population, SamplingScope};
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
-use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
+use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportOptions};
 
 /// Evaluates light field `l`: the target, the given observers, a population sample, a camera attacker, key
 /// sensitivity and head movement. Transport operators come from `cache`; `progress` receives 0..=1.
@@ -93,11 +95,14 @@ pub fn evaluate(
     let key_sensitivity = ev.key_sensitivity()?;
     progress(0.9);
     let head_movement = ev.head_movement(target_score.readable)?;
+    progress(0.95);
+    let target_light = mean_luminance(&t_obs, l);
+    let bystanders = ev.bystanders(target_light, &|p| progress(0.95 + 0.05 * p))?;
     progress(1.0);
 
     let mut report = Report {
         metric:
-            "legibility = max over Gaussian denoising σ ∈ {0, 0.7, 1.5} px of |NCC(view luminance, document luminance)|"
+            "legibility = max over Gaussian denoising σ ∈ {0, 0.7, 1.5} px of |NCC(view luminance, document luminance)| inside the box around the document's ink (+2 px)"
                 .into(),
         threshold: options.threshold,
         target: target_score,
@@ -106,6 +111,7 @@ pub fn evaluate(
         camera,
         key_sensitivity,
         head_movement,
+        bystanders,
     };
     if let (Some(k), Some(p)) = (report.key_sensitivity.as_mut(), report.population.as_ref()) {
         k.empirical_bits = -(((p.readable_count + 1) as f64) / ((p.count + 1) as f64)).log2();
@@ -298,11 +304,190 @@ impl Evaluator<'_> {
             readable_radius_mm: radius,
         }))
     }
+
+    /// Scores a bystander's luminance view both as seen and resampled onto the document's layout (the
+    /// attacker knows the geometry and where they stand); the better of the two.
+    fn score_bystander(&self, label: &str, lum: &[f32], white: f64, grid: &RetinalGrid, eye: EyePosition) -> ViewScore {
+        let seen = self.reference.score(label, lum, white);
+        let back = self
+            .reference
+            .score(label, &unwarp(lum, grid, self.display, eye), white);
+        let better = |a: &ViewScore, b: &ViewScore| (a.readable, a.legibility) >= (b.readable, b.legibility);
+        if better(&seen, &back) {
+            seen
+        } else {
+            back
+        }
+    }
+
+    /// People and the focus-sweeping camera at every bystander position.
+    fn bystanders(
+        &mut self,
+        target_light: f64,
+        progress: &dyn Fn(f64),
+    ) -> Result<Option<BystanderSummary>, EvaluationError> {
+        let Some(bo) = self.options.bystanders.clone() else {
+            return Ok(None);
+        };
+        bo.validate().map_err(EvaluationError::Bystanders)?;
+        let display = self.display;
+        let rgb = coupling(&display.projectors, &camera_rgb()).c;
+        let mut out = Vec::new();
+        let mut best_view: Option<(f64, RgbImage)> = None;
+        let positions = bo.positions(display);
+        let n = positions.len();
+        for (k, eye) in positions.into_iter().enumerate() {
+            let at = format!("({:+.0}, {:+.0}, {:+.0}) mm", eye.x_mm, eye.y_mm, eye.dz_mm);
+            let people = sample_population(
+                bo.people as usize,
+                self.options.seed ^ 0xB75D ^ (k as u64) << 20,
+                SamplingScope::default(),
+            );
+            let mut best_person: Option<ViewScore> = None;
+            let mut people_read = 0;
+            let mut light = 0.0;
+            for (i, p) in people.iter().enumerate() {
+                self.check()?;
+                let o = self.observer(p, eye)?;
+                let view = o.view(self.l);
+                let lum = luminance(&view);
+                light += mean(&lum);
+                let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
+                let s = self.score_bystander(&format!("bystander {at} person {i}"), &lum, white, &o.grid(), eye);
+                people_read += u32::from(s.readable);
+                if best_view.as_ref().is_none_or(|(b, _)| s.legibility > *b) {
+                    best_view = Some((s.legibility, o.picture(&view)));
+                }
+                if best_person.as_ref().is_none_or(|b| s.legibility > b.legibility) {
+                    best_person = Some(s);
+                }
+            }
+            let (mut best_camera, mut camera_read, mut settings) = (None::<ViewScore>, 0, 0);
+            for &aperture in &bo.camera_apertures_mm {
+                for &focus in &bo.camera_focus_d {
+                    self.check()?;
+                    let lens = camera_lens(focus, aperture);
+                    let tr = transports(
+                        display,
+                        Lens::Achromat(&lens),
+                        eye,
+                        &self.topts,
+                        self.options.optics,
+                        self.cache,
+                    )
+                    .map_err(crate::physics::observer::ObserverError::from)?;
+                    for (name, c) in camera_channels(&rgb, display.n_bands()) {
+                        let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
+                        let lum: Vec<f32> = cam.view(self.l).chunks_exact(3).map(|p| p[0]).collect();
+                        let label = format!("camera {at} f={focus:+.1}D aperture={aperture}mm {name}");
+                        let s = self.score_bystander(&label, &lum, cam.white[0], &cam.grid(), eye);
+                        settings += 1;
+                        camera_read += u32::from(s.readable);
+                        if best_camera.as_ref().is_none_or(|b| s.legibility > b.legibility) {
+                            best_camera = Some(s);
+                        }
+                    }
+                }
+            }
+            let distance_mm = (eye.x_mm.powi(2) + eye.y_mm.powi(2) + eye.dz_mm.powi(2)).sqrt();
+            out.push(BystanderPosition {
+                eye,
+                distance_mm,
+                relative_light: if target_light > 0.0 && !people.is_empty() {
+                    light / people.len() as f64 / target_light
+                } else {
+                    0.0
+                },
+                best_person,
+                people_read,
+                people: people.len() as u32,
+                best_camera,
+                camera_settings_read: camera_read,
+                camera_settings: settings,
+            });
+            progress((k + 1) as f64 / n as f64);
+        }
+        if let Some((_, pic)) = best_view {
+            self.pictures.push(("bystander_best.png".to_string(), pic));
+        }
+        Ok(Some(BystanderSummary::from_positions(out)))
+    }
+}
+
+/// Mean of a luminance image.
+fn mean(v: &[f32]) -> f64 {
+    v.iter().map(|x| *x as f64).sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Mean luminance of what `o` sees of `l`.
+fn mean_luminance(o: &Observer, l: &[f32]) -> f64 {
+    mean(&luminance(&o.view(l)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_plain_image_is_read_by_a_bystander_beside_the_target_and_not_from_far_outside_the_display() {
+        // A plain 2D image (every view of a lenslet equal) is the opposite of secret: 10 mm aside an eye sees
+        // it through the neighbouring blocks, shifted by two lenslets, and reads it once the shift is undone.
+        // 500 mm aside the screen lies outside every lenslet's line of sight: the view is dark and unread.
+        let display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        let lines = ["PIN", "4821"];
+        let document = crate::imaging::glyphs::render_text(&lines, 128, 128, 4);
+        let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        let options = EvaluationOptions {
+            population: 0,
+            sub_rays: 4,
+            key_directions: 0,
+            head_offsets_mm: vec![],
+            camera_focus_d: vec![],
+            document_text: Some(DocumentText {
+                lines: lines.iter().map(|s| s.to_string()).collect(),
+                scale: 4,
+                alphabet: "0123456789".into(),
+            }),
+            bystanders: Some(BystanderOptions {
+                lateral_mm: vec![10.0, 500.0],
+                distances_mm: vec![],
+                people: 1,
+                camera_focus_d: vec![0.0],
+                camera_apertures_mm: vec![4.0],
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let ev = evaluate(
+            &display,
+            &l,
+            &document,
+            0.8,
+            &VisionProfile::perfect(),
+            &[],
+            &options,
+            &TransportCache::default(),
+            &|_| {},
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        let b = ev.report.bystanders.unwrap();
+        assert_eq!(b.positions.len(), 8);
+        assert_eq!(b.nearest_reader_mm, Some(10.0), "{:#?}", b.positions);
+        for p in &b.positions {
+            if p.distance_mm == 10.0 {
+                assert_eq!(p.people_read, 1, "{p:#?}");
+                assert!(p.relative_light > 0.5, "{p:#?}");
+            } else {
+                assert_eq!((p.people_read, p.camera_settings_read), (0, 0), "{p:#?}");
+                assert!(p.relative_light < 0.01, "{p:#?}");
+            }
+        }
+    }
 
     #[test]
     fn ncc_is_contrast_and_sign_invariant_in_legibility() {

@@ -32,6 +32,8 @@ pub struct EvaluationOptions {
     /// The document's text, font and secret alphabet, when known (a PIN slip eyekey rendered): every view is
     /// then also read by the known-font attacker.
     pub document_text: Option<crate::evaluation::DocumentText>,
+    /// Bystanders anywhere else (people and a focus-sweeping camera on a grid of positions); None skips them.
+    pub bystanders: Option<crate::evaluation::BystanderOptions>,
 }
 
 impl Default for EvaluationOptions {
@@ -48,6 +50,7 @@ impl Default for EvaluationOptions {
             head_offsets_mm: vec![0.5, 1.0, 2.0, 4.0],
             saved_population_views: 3,
             document_text: None,
+            bystanders: None,
         }
     }
 }

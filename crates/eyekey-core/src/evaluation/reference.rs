@@ -1,6 +1,6 @@
 //! The document as the evaluation sees it: luminance on the retinal grid at the objective's level.
 
-use crate::evaluation::{image_luminance, legibility, luminance, ncc, psnr, ssim, ViewScore};
+use crate::evaluation::{image_luminance, ink_box, legibility_in, luminance, ncc, psnr, ssim, ViewScore, INK_MARGIN};
 use crate::imaging;
 use crate::physics::observer::Observer;
 use image::RgbImage;
@@ -19,19 +19,24 @@ pub struct Reference {
     pub threshold: f64,
     /// The known-font attacker, when the document's text is known.
     pub known_font: Option<crate::evaluation::KnownFontAttacker>,
+    /// The box around the document's ink where legibility is measured (x0, y0, x1, y1).
+    pub ink_box: (usize, usize, usize, usize),
 }
 
 impl Reference {
     /// From an sRGB document resized to the retinal grid.
     pub fn new(document: &RgbImage, width: u32, height: u32, level: f64, threshold: f64) -> Self {
         let resized = imaging::resize(document, width, height);
+        let document = image_luminance(&resized);
+        let ink_box = ink_box(&document, width as usize, height as usize, INK_MARGIN);
         Self {
-            document: image_luminance(&resized),
+            document,
             width: width as usize,
             height: height as usize,
             level,
             threshold,
             known_font: None,
+            ink_box,
         }
     }
 
@@ -43,7 +48,7 @@ impl Reference {
 
     /// Scores a luminance view; `white_luminance` is the viewer's luminance of the display's full white.
     pub fn score(&self, label: &str, view_luminance: &[f32], white_luminance: f64) -> ViewScore {
-        let leg = legibility(view_luminance, &self.document, self.width, self.height);
+        let leg = legibility_in(view_luminance, &self.document, self.width, self.height, self.ink_box);
         let norm: Vec<f32> = view_luminance
             .iter()
             .map(|v| (*v as f64 / white_luminance) as f32)

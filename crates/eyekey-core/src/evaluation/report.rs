@@ -167,6 +167,9 @@ pub struct Report {
     pub key_sensitivity: Option<KeySensitivity>,
     /// Head movement.
     pub head_movement: Option<HeadMovement>,
+    /// Bystanders beside, above, nearer and farther, people and cameras.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bystanders: Option<crate::evaluation::BystanderSummary>,
 }
 
 /// A finished evaluation: the report and pictures (file name, image).
@@ -187,6 +190,9 @@ pub enum EvaluationError {
     /// The document's text hint does not fit the document.
     #[error("document text: {0}")]
     DocumentText(#[from] crate::evaluation::KnownFontError),
+    /// The bystander options are out of range.
+    #[error("bystanders: {0}")]
+    Bystanders(String),
     /// The cancel flag was raised.
     #[error("cancelled")]
     Cancelled,

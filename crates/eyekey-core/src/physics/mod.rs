@@ -9,5 +9,6 @@ pub mod population;
 pub mod profile;
 pub mod resolvability;
 pub mod spectral;
+pub mod tracking;
 pub mod transport;
 pub mod zernike;

@@ -318,8 +318,8 @@ pub const KERNEL_RAYS_PER_SUB_RAY: u32 = 128;
 /// fan (its views, and the aperture's own width projected to the pupil) and by diffraction out to the radius
 /// holding 90 % of the light (2.23·λ/a for a hole's Airy pattern, λ/A per axis for a lenslet's sinc²).
 ///
-/// The window is centred on the block nearest the eye's line of sight, so an eye off that line by up to half a
-/// block adds its distance from it.
+/// The window is centred on the block nearest the eye's line of sight through each aperture, so an eye off that
+/// line by up to half a block adds its distance from it.
 pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm: f64, eye: EyePosition) -> u32 {
     let d = display.viewing_distance_mm;
     let a = display.hole_diameter_mm;
@@ -332,7 +332,14 @@ pub fn neighbour_blocks(display: &DisplayGeometry, wavelength_nm: f64, pupil_mm:
     let fan_half = 0.5 * views * display.view_spacing_at_pupil_mm() + aperture_half;
     let per_block = display.block_shift_at_pupil_mm(d + eye.dz_mm);
     let residual = |e: f64| (e - (e / per_block).round() * per_block).abs();
-    let off_line = residual(eye.x_mm).hypot(residual(eye.y_mm));
+    // At the design distance every aperture shows the eye the same block (`transport::block_seen`); nearer or
+    // farther the block differs across the display, and an aperture's line of sight can be off its block's
+    // aim by up to half a block either way.
+    let off_line = if eye.dz_mm == 0.0 {
+        residual(eye.x_mm).hypot(residual(eye.y_mm))
+    } else {
+        0.5 * per_block * std::f64::consts::SQRT_2
+    };
     (((pupil_mm / 2.0 + fan_half + spread + off_line) / per_block).floor() as u32).min(16)
 }
 

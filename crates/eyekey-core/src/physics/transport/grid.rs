@@ -47,6 +47,7 @@ impl RetinalGrid {
 
 /// Where the viewer's pupil centre is, relative to the barrier's centre.
 #[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct EyePosition {
     /// Lateral offset, mm.
     pub x_mm: f64,

@@ -36,6 +36,7 @@ pub use csr::CsrMatrix;
 pub use grid::{EyePosition, RetinalGrid, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND};
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
 pub use stencil::{multiply_add_peak_gflops, vector_isa, ProductMethod, StencilOperator};
+pub use trace::block_seen;
 
 use rayon::prelude::*;
 
@@ -697,6 +698,50 @@ mod tests {
             .collect();
         let mean = lit.iter().sum::<f32>() / lit.len() as f32;
         assert!(mean > 0.3 && mean < 1.5, "mean brightness {mean}");
+    }
+
+    #[test]
+    fn the_block_an_eye_sees_is_the_one_its_chief_ray_lands_in() {
+        // Independent of block_seen's closed form: intersect the chief ray from the eye through the hole's
+        // centre with the screen (q = h + (h − e)·g/d') and find the block whose extent contains q by search.
+        let d = DisplayGeometry::lenslet();
+        let block_pitch = d.hole_pitch_mm * (1.0 + d.gap_mm / d.viewing_distance_mm);
+        for (ex, ey, d_eye) in [
+            (0.0, 0.0, 500.0),
+            (30.0, -12.0, 500.0),
+            (-80.0, 5.0, 300.0),
+            (15.0, 40.0, 1500.0),
+        ] {
+            for (hx, hy) in [(0, 0), (10, 30), (47, 47), (24, 3)] {
+                let h = d.hole_centre_mm(hx, hy);
+                let k = block_seen(&d, d_eye, [ex, ey], h);
+                let q = [
+                    h[0] + (h[0] - ex) * d.gap_mm / d_eye,
+                    h[1] + (h[1] - ey) * d.gap_mm / d_eye,
+                ];
+                let found = |axis: usize, own: u32, n: u32| -> i64 {
+                    (-200i64..200)
+                        .find(|b| {
+                            let idx = own as i64 + b;
+                            let c = (idx as f64 - (n as f64 - 1.0) / 2.0) * block_pitch;
+                            (q[axis] - c).abs() <= 0.5 * block_pitch
+                        })
+                        .unwrap()
+                };
+                assert_eq!(
+                    k,
+                    [found(0, hx, d.holes_x), found(1, hy, d.holes_y)],
+                    "eye ({ex}, {ey}) at {d_eye} mm, hole ({hx}, {hy})"
+                );
+            }
+        }
+        // At the design distance every hole shows the same block offset, −e/(block shift at the pupil).
+        let e = 30.0;
+        let k = (-e / d.block_shift_at_pupil_mm(d.viewing_distance_mm)).round() as i64;
+        for hx in [0, 20, 47] {
+            let h = d.hole_centre_mm(hx, 5);
+            assert_eq!(block_seen(&d, d.viewing_distance_mm, [e, 0.0], h)[0], k);
+        }
     }
 
     #[test]

@@ -94,6 +94,19 @@ pub(super) struct Tracer<'a> {
     pub(super) wave_weight: f64,
 }
 
+/// Which block, counted from the hole's own, an eye at lateral position `eye` (mm) and distance `d_eye` from
+/// the barrier sees through the hole centred at `hole` (mm): the chief ray from the eye through the hole meets
+/// the screen at q = h + (h − e)·g/d_eye, and the blocks are centred at h_b·(1 + g/d) (aimed at the design eye
+/// position, docs/design.md §2), so it lands in block (h(1 + g/d_eye) − e·g/d_eye) / (p_h(1 + g/d)). At the
+/// design distance this is the hole's own block shifted by k = −e/(p_h(1 + g/d)·d/g), the same for every
+/// hole; nearer or farther, the offset grows across the display (the view is magnified or shrunk).
+pub fn block_seen(display: &DisplayGeometry, d_eye: f64, eye: [f64; 2], hole: [f64; 2]) -> [i64; 2] {
+    let (g, p) = (display.gap_mm, display.hole_pitch_mm);
+    let aim = 1.0 + g / display.viewing_distance_mm;
+    let k = |h: f64, e: f64| ((h * (1.0 + g / d_eye) - e * g / d_eye) / (p * aim) - h / p).round() as i64;
+    [k(hole[0], eye[0]), k(hole[1], eye[1])]
+}
+
 impl Tracer<'_> {
     /// Traces hole `h`'s sub-rays (S per view, jittered over the aperture and the screen pixel's square) to
     /// the pupil; returns the landings of those that enter it, their ∂f/∂W_j (flat, landing × term) and the
@@ -108,14 +121,13 @@ impl Tracer<'_> {
         let mut landings: Vec<Landing> = Vec::with_capacity(views * s);
         let mut dfs: Vec<[f64; 2]> = Vec::with_capacity(views * s * self.term_polys.len());
         let mut traced = 0u64;
-        // Blocks k over send their light k·p_h(1 + g/d)·d/g away from the view's aim, to the other side: an eye
-        // offset by e sees mostly the blocks around k* = −e/(that pitch).
+        // The blocks around the one this hole shows the eye: see `block_seen`.
         let (nb, kx, ky) = match self.options.wave {
             None => (0, 0, 0),
             Some(w) => {
-                let per_block = display.block_shift_at_pupil_mm(self.d_eye);
-                let k = |e: f64| (-e / per_block).round() as i64;
-                (w.neighbour_blocks as i64, k(self.eye.x_mm), k(self.eye.y_mm))
+                let centre = display.hole_centre_mm(hx, hy);
+                let k = block_seen(display, self.d_eye, [self.eye.x_mm, self.eye.y_mm], centre);
+                (w.neighbour_blocks as i64, k[0], k[1])
             }
         };
         let (y0, x0) = (hy as i64 + ky, hx as i64 + kx);

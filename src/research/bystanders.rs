@@ -1,0 +1,202 @@
+//! `eyekey experiment bystanders`: a PIN slip encoded for the sweep's sampled target on the wave sweep's
+//! lenslet baseline, looked at from a grid of positions beside, above, nearer and farther by sampled people and
+//! by a camera that sweeps focus ±3 D and aperture 2–8 mm behind RGB and one-band filters
+//! (`eyekey_core::evaluation::BystanderOptions`); and by the same camera at the target's own position.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::Result;
+
+use super::experiment::{pin_slip, pin_slip_text, sampled_target, sweep_lenslet};
+use super::table_header;
+use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
+use eyekey_core::evaluation::{evaluate, BystanderOptions, BystanderSummary, EvaluationOptions, ViewScore};
+use eyekey_core::physics::observer::Optics;
+use eyekey_core::physics::transport::TransportCache;
+
+/// One encoding looked at from everywhere.
+struct Encoding {
+    label: &'static str,
+    decoys: u32,
+    decoy_weight: f64,
+}
+
+fn score_cell(s: Option<&ViewScore>) -> String {
+    match s {
+        None => "–".into(),
+        Some(s) => {
+            let kf = s
+                .known_font
+                .as_ref()
+                .map(|k| format!(", read \"{}\" ({}/{})", k.text, k.characters_right, k.characters))
+                .unwrap_or_default();
+            format!("{:.2}{kf}", s.legibility)
+        }
+    }
+}
+
+fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
+    md.push_str(&table_header(&[
+        "position (x, y, Δd) mm",
+        "from the target's pupil",
+        "light vs target",
+        "people read",
+        "best person: legibility, known font",
+        "camera settings read",
+        "best camera: legibility, known font (setting)",
+    ]));
+    for p in &b.positions {
+        let cam = p
+            .best_camera
+            .as_ref()
+            .map(|c| {
+                let setting = c.label.split(") mm ").nth(1).unwrap_or("");
+                format!("{} ({setting})", score_cell(Some(c)))
+            })
+            .unwrap_or_else(|| "–".into());
+        writeln!(
+            md,
+            "| ({:+.0}, {:+.0}, {:+.0}) | {:.0} mm | {:.2} | {} of {} | {} | {} of {} | {} |",
+            p.eye.x_mm,
+            p.eye.y_mm,
+            p.eye.dz_mm,
+            p.distance_mm,
+            p.relative_light,
+            p.people_read,
+            p.people,
+            score_cell(p.best_person.as_ref()),
+            p.camera_settings_read,
+            p.camera_settings,
+            cam
+        )?;
+    }
+    Ok(())
+}
+
+/// Runs the bystander experiment with `people` sampled people per position; writes `out/bystanders.md`,
+/// `out/bystanders.json` and each encoding's pictures; returns the Markdown.
+pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
+    std::fs::create_dir_all(out)?;
+    let cache = TransportCache::default();
+    let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
+    display.validate()?;
+    let target = sampled_target();
+    let g = (display.holes_x * 4, display.holes_y * 4);
+    let document = pin_slip(g.0, g.1);
+    let encodings = [
+        Encoding {
+            label: "no decoys",
+            decoys: 0,
+            decoy_weight: 0.0,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
+            decoys: 6,
+            decoy_weight: 0.3,
+        },
+    ];
+    let mut md = String::new();
+    let mut all = Vec::new();
+    for (k, e) in encodings.iter().enumerate() {
+        let t = Instant::now();
+        let spec = JobSpec {
+            display: display.clone(),
+            target: target.clone(),
+            target_label: "bystanders".into(),
+            observers: vec![],
+            document: document.clone(),
+            decoy: None,
+            options: EncodeOptions {
+                population_decoys: e.decoys,
+                decoy_weight: e.decoy_weight,
+                max_iterations,
+                sub_rays: 12,
+                seed: 5,
+                optics: Optics::Wave,
+                ..Default::default()
+            },
+        };
+        let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+        let t_encode = t.elapsed().as_secs_f64();
+        let options = EvaluationOptions {
+            population: 0,
+            optics: Optics::Wave,
+            document_text: Some(pin_slip_text(g.0)),
+            sub_rays: 12,
+            key_directions: 0,
+            head_offsets_mm: vec![],
+            camera_focus_d: BystanderOptions::default().camera_focus_d,
+            camera_apertures_mm: BystanderOptions::default().camera_apertures_mm,
+            bystanders: Some(BystanderOptions {
+                people,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let t = Instant::now();
+        let ev = evaluate(
+            &display,
+            &enc.light_field,
+            &document,
+            OBJECTIVE_LEVEL,
+            &target,
+            &[],
+            &options,
+            &cache,
+            &|p| {
+                eprint!(
+                    "\r{}: evaluation {:.0} % ({:.0} s)",
+                    e.label,
+                    100.0 * p,
+                    t.elapsed().as_secs_f64()
+                )
+            },
+            &AtomicBool::new(false),
+        )?;
+        let t_eval = t.elapsed().as_secs_f64();
+        let dir = out.join(format!("encoding_{k}"));
+        eyekey_core::encoding::pipeline::write_evaluation(&ev, &dir)?;
+        let r = &ev.report;
+        let b = r.bystanders.as_ref().expect("bystanders were asked for");
+        writeln!(md, "### {}\n", e.label)?;
+        writeln!(
+            md,
+            "Target: legibility {:.2}, known font {}. Camera at the target's position (focus ±3 D, apertures 2–8 mm, RGB and one-band filters): {}. Encode {t_encode:.0} s, evaluation {t_eval:.0} s.\n",
+            r.target.legibility,
+            score_cell(Some(&r.target)),
+            r.camera
+                .as_ref()
+                .map(|c| format!(
+                    "best {} ({}), {} of {} settings read",
+                    score_cell(Some(&c.best)),
+                    c.best.label,
+                    c.tried.iter().filter(|s| s.readable).count(),
+                    c.tried.len()
+                ))
+                .unwrap_or_else(|| "not evaluated".into())
+        )?;
+        match b.nearest_reader_mm {
+            Some(d) => writeln!(
+                md,
+                "**Nearest bystander who read: {d:.0} mm from the target's pupil** (nearest position looked at: {:.0} mm).\n",
+                b.nearest_position_mm
+            )?,
+            None => writeln!(
+                md,
+                "**No bystander read** at any of the {} positions ({:.0} mm and farther from the target's pupil).\n",
+                b.positions.len(),
+                b.nearest_position_mm
+            )?,
+        }
+        position_rows(&mut md, b)?;
+        md.push('\n');
+        eprintln!("\n{}: encode {t_encode:.0} s, evaluation {t_eval:.0} s", e.label);
+        all.push(serde_json::json!({"encoding": e.label, "report": r}));
+    }
+    std::fs::write(out.join("bystanders.md"), &md)?;
+    std::fs::write(out.join("bystanders.json"), serde_json::to_string_pretty(&all)?)?;
+    Ok(md)
+}
