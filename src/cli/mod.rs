@@ -63,6 +63,22 @@ pub enum DisplayCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Head tracking: re-index a bundle's frames for the eye position a tracker reports (sideways, at the
+    /// design distance), so the target keeps reading without a new encode; writes a new bundle.
+    Track {
+        /// The bundle (directory) encoded for the design position.
+        #[arg(long)]
+        bundle: PathBuf,
+        /// The tracked eye's offset to the right of the design position, mm.
+        #[arg(long, allow_hyphen_values = true)]
+        eye_x: f64,
+        /// The tracked eye's vertical offset (along the display's y axis), mm.
+        #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
+        eye_y: f64,
+        /// Output directory (must not exist).
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 /// `eyekey experiment ...`
@@ -100,7 +116,7 @@ pub enum ExperimentCommand {
         max_iterations: u32,
     },
     /// A PIN slip on the wave sweep's lenslet baseline, looked at by people and a focus-sweeping camera from a
-    /// grid of positions beside, above, nearer and farther than the target.
+    /// grid of positions beside and above the target, at its viewing distance.
     Bystanders {
         /// Output directory.
         #[arg(long, default_value = "docs/experiments/bystanders")]
@@ -108,6 +124,19 @@ pub enum ExperimentCommand {
         /// People sampled at every position.
         #[arg(long, default_value_t = 6)]
         people: u32,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 200)]
+        max_iterations: u32,
+    },
+    /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
+    /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
+    Headbox {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/headbox")]
+        out: PathBuf,
+        /// People sampled at the design position per encoding.
+        #[arg(long, default_value_t = 60)]
+        population: u32,
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
@@ -264,6 +293,16 @@ pub struct EvaluateArgs {
     /// Forward model of every simulated view: wave or geometric.
     #[arg(long, value_enum, default_value = "wave")]
     pub optics: Optics,
+    /// The document's text as drawn by `eyekey example document` (repeat per line; write secret characters
+    /// as `*` to have them read from the document): every view is then also read by the known-font attacker.
+    #[arg(long)]
+    pub text: Vec<String>,
+    /// Pixels per font dot of --text, as drawn.
+    #[arg(long, default_value_t = 4)]
+    pub text_scale: u32,
+    /// The secret characters' alphabet of --text.
+    #[arg(long, default_value = "0123456789")]
+    pub alphabet: String,
     /// Output directory (report.json, views/).
     #[arg(long)]
     pub out: PathBuf,
@@ -401,6 +440,19 @@ pub fn run(cli: Cli) -> Result<()> {
             )?;
         }
         Command::Display(DisplayCommand::Check { display, json }) => display_check(&display, json)?,
+        Command::Display(DisplayCommand::Track {
+            bundle,
+            eye_x,
+            eye_y,
+            out,
+        }) => {
+            let m = crate::client::track_bundle(&bundle, eye_x, eye_y, &out)?;
+            println!(
+                "wrote {} re-indexed by {} views for the eye at ({eye_x}, {eye_y}) mm",
+                out.display(),
+                m.encoder["tracked_view_shift"]
+            );
+        }
         Command::Simulate(a) => simulate(&a)?,
         Command::Encode(a) => encode(&a)?,
         Command::Evaluate(a) => evaluate(&a)?,
@@ -447,6 +499,16 @@ pub fn run(cli: Cli) -> Result<()> {
             max_iterations,
         }) => {
             print!("{}", crate::research::bystanders::run(&out, people, max_iterations)?);
+        }
+        Command::Experiment(ExperimentCommand::Headbox {
+            out,
+            population,
+            max_iterations,
+        }) => {
+            print!(
+                "{}",
+                crate::research::bystanders::headbox(&out, population, max_iterations)?
+            );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
@@ -651,11 +713,22 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     if a.population > 2000 {
         bail!("--population must be at most 2000, got {}", a.population);
     }
+    let document_text = if a.text.is_empty() {
+        None
+    } else {
+        let hint = eyekey_core::evaluation::DocumentText {
+            lines: a.text.clone(),
+            scale: a.text_scale,
+            alphabet: a.alphabet.clone(),
+        };
+        Some(hint.resolve(&document).context("--text")?)
+    };
     let options = EvaluationOptions {
         population: a.population,
         seed: a.seed,
         threshold: a.threshold,
         optics: a.optics,
+        document_text,
         ..Default::default()
     };
     let bar = progress_bar("evaluating");

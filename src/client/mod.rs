@@ -35,6 +35,7 @@ mod install;
 mod sse;
 mod state;
 mod sync;
+mod track;
 
 pub use backoff::Backoff;
 pub use config::{ClientConfig, DisplayClientArgs};
@@ -45,6 +46,7 @@ pub use install::prepare_out_dir;
 pub use sse::{SseEvent, SseParser};
 pub use state::{read_state, ClientState, ShownJob};
 pub use sync::{sync_once, SyncOutcome};
+pub use track::{track_bundle, MAX_TRACKED_OFFSET_MM};
 
 pub use crate::service::app::stop_signal;
 

@@ -1,7 +1,8 @@
 //! `eyekey experiment bystanders`: a PIN slip encoded for the sweep's sampled target on the wave sweep's
-//! lenslet baseline, looked at from a grid of positions beside, above, nearer and farther by sampled people and
-//! by a camera that sweeps focus ±3 D and aperture 2–8 mm behind RGB and one-band filters
-//! (`eyekey_core::evaluation::BystanderOptions`); and by the same camera at the target's own position.
+//! lenslet baseline, looked at from a grid of positions beside and above the target (10–500 mm, at the design
+//! distance) by sampled people and by a camera that sweeps focus ±3 D and aperture 2–8 mm behind RGB and
+//! one-band filters (`eyekey_core::evaluation::BystanderOptions`); and by the same camera at the target's own
+//! position. `eyekey experiment headbox`: the target's head box.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -130,8 +131,12 @@ pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
             head_offsets_mm: vec![],
             camera_focus_d: BystanderOptions::default().camera_focus_d,
             camera_apertures_mm: BystanderOptions::default().camera_apertures_mm,
+            // At the design distance only: nearer and farther eyes need the traced operator, whose cost grows
+            // with the blocks around each aperture (a camera at 300 mm, 8 mm aperture: 7×7 blocks, about 2·10⁸
+            // sub-rays per band), more than a minute per viewer here; see docs/experiments.md.
             bystanders: Some(BystanderOptions {
                 people,
+                distances_mm: vec![],
                 ..Default::default()
             }),
             ..Default::default()
@@ -198,5 +203,163 @@ pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
     }
     std::fs::write(out.join("bystanders.md"), &md)?;
     std::fs::write(out.join("bystanders.json"), serde_json::to_string_pretty(&all)?)?;
+    Ok(md)
+}
+
+/// How the target's head box is served.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum HeadBoxMethod {
+    /// Frames encoded for the design position, shown as they are.
+    Fixed,
+    /// The same frames re-indexed for the tracked eye position (`physics::tracking::retarget`).
+    Tracked,
+}
+
+/// The target's worst reading on rings of `offsets` around the design position (right, left, up, down): the
+/// lowest legibility and how many of the ring's positions the known-font attacker read.
+fn head_rings(
+    display: &eyekey_core::physics::display::DisplayGeometry,
+    l: &[f32],
+    target: &eyekey_core::physics::profile::VisionProfile,
+    reference: &eyekey_core::evaluation::Reference,
+    method: HeadBoxMethod,
+    offsets: &[f64],
+    cache: &TransportCache,
+) -> Result<Vec<(f64, f64, u32)>> {
+    let topts = eyekey_core::physics::transport::TransportOptions {
+        sub_rays: 12,
+        seed: 0xBEAD,
+        ..Default::default()
+    };
+    let mut out = Vec::new();
+    for &r in offsets {
+        let (mut worst, mut read) = (f64::INFINITY, 0);
+        for eye in eyekey_core::evaluation::attackers::head_ring(r) {
+            let o = eyekey_core::physics::observer::Observer::new(display, target, eye, &topts, Optics::Wave, cache)?;
+            let shown = match method {
+                HeadBoxMethod::Fixed => l.to_vec(),
+                HeadBoxMethod::Tracked => eyekey_core::physics::tracking::retarget(display, l, eye),
+            };
+            let (s, _) = reference.score_observer("target moved", &o, &shown);
+            worst = worst.min(s.legibility);
+            read += u32::from(s.known_font.as_ref().is_some_and(|k| k.correct));
+        }
+        out.push((r, worst, read));
+    }
+    Ok(out)
+}
+
+/// The head-box experiment: the wave sweep's baseline encoding, shown fixed or re-indexed for the tracked eye,
+/// and encodings with the target stacked at 4 positions on a ring (2.5 mm, 5 mm); the target's readings over
+/// ±5 mm and the fraction of `population` people at the design position who read each. Writes
+/// `out/headbox.md`.
+pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<String> {
+    std::fs::create_dir_all(out)?;
+    let cache = TransportCache::default();
+    let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
+    let target = sampled_target();
+    let g = (display.holes_x * 4, display.holes_y * 4);
+    let document = pin_slip(g.0, g.1);
+    let text = pin_slip_text(g.0);
+    let reference = eyekey_core::evaluation::Reference::new(
+        &document,
+        display.holes_x,
+        display.holes_y,
+        OBJECTIVE_LEVEL,
+        eyekey_core::evaluation::DEFAULT_THRESHOLD,
+    )
+    .with_known_font(eyekey_core::evaluation::KnownFontAttacker::new(
+        &text,
+        g.0,
+        g.1,
+        display.holes_x,
+        display.holes_y,
+    )?);
+    let offsets = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+    let mut md = table_header(&[
+        "frames",
+        "encode",
+        "people at the design position who read (95 % CI)",
+        "target at 0 / 1 / 2 / 3 / 4 / 5 mm: worst legibility (ring positions read by the known-font attacker, of 4)",
+    ]);
+    for (label, head_radius_mm, method) in [
+        (
+            "encoded for the design position, shown fixed",
+            0.0,
+            HeadBoxMethod::Fixed,
+        ),
+        (
+            "the same frames re-indexed for the tracked eye",
+            0.0,
+            HeadBoxMethod::Tracked,
+        ),
+        ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed),
+        ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed),
+    ] {
+        let t = Instant::now();
+        let spec = JobSpec {
+            display: display.clone(),
+            target: target.clone(),
+            target_label: "head box".into(),
+            observers: vec![],
+            document: document.clone(),
+            decoy: None,
+            options: EncodeOptions {
+                population_decoys: 6,
+                decoy_weight: 0.3,
+                head_radius_mm,
+                max_iterations,
+                sub_rays: 12,
+                seed: 5,
+                optics: Optics::Wave,
+                ..Default::default()
+            },
+        };
+        let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+        let t_encode = t.elapsed().as_secs_f64();
+        let ev = evaluate(
+            &display,
+            &enc.light_field,
+            &document,
+            OBJECTIVE_LEVEL,
+            &target,
+            &[],
+            &EvaluationOptions {
+                population,
+                optics: Optics::Wave,
+                document_text: Some(text.clone()),
+                sub_rays: 12,
+                key_directions: 0,
+                head_offsets_mm: vec![],
+                camera_focus_d: vec![],
+                ..Default::default()
+            },
+            &cache,
+            &|_| {},
+            &AtomicBool::new(false),
+        )?;
+        let p = ev.report.population.as_ref().expect("a population was asked for");
+        let rings = head_rings(
+            &display,
+            &enc.light_field,
+            &target,
+            &reference,
+            method,
+            &offsets,
+            &cache,
+        )?;
+        let cells: Vec<String> = rings.iter().map(|(_, w, read)| format!("{w:.2} ({read})")).collect();
+        writeln!(
+            md,
+            "| {label} | {t_encode:.0} s | {} of {} ({:.0}–{:.0} %) | {} |",
+            p.readable_count,
+            p.count,
+            100.0 * p.readable_ci95.0,
+            100.0 * p.readable_ci95.1,
+            cells.join(" / ")
+        )?;
+        eprintln!("{label}: {}", md.lines().last().unwrap_or(""));
+    }
+    std::fs::write(out.join("headbox.md"), &md)?;
     Ok(md)
 }

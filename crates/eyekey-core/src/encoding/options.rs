@@ -96,6 +96,11 @@ pub struct EncodeOptions {
     /// Camera decoys: an ideal 6 mm lens focused at −0.5 D and +0.5 D behind a filter passing one projector band
     /// (the evaluation's strongest attacker), each shown a noise mask.
     pub camera_decoys: bool,
+    /// The document's text, font scale and secret alphabet, when it is a PIN slip or form drawn in eyekey's
+    /// font (`eyekey example document`): the job's evaluation then also reads every view with the known-font
+    /// attacker. Write secret characters as `*` to describe the layout without the secret; their values are
+    /// read from the document when the job runs.
+    pub document_text: Option<crate::evaluation::DocumentText>,
 }
 
 impl Default for EncodeOptions {
@@ -119,6 +124,7 @@ impl Default for EncodeOptions {
             adaptive_candidates: 24,
             adaptive_per_round: 4,
             camera_decoys: false,
+            document_text: None,
         }
     }
 }
@@ -167,6 +173,10 @@ impl EncodeOptions {
                 "adaptive_rounds",
                 "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
             );
+        }
+        if let Some(t) = &self.document_text {
+            t.validate()
+                .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
         }
         if self.evaluation_population > 2000 {
             return bad(

@@ -116,6 +116,9 @@ fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
             ),
         ));
     }
+    if let Some(text) = &spec.options.document_text {
+        document_text(spec, text)?;
+    }
     if let Some(decoy) = &spec.decoy {
         if !aspect_matches(decoy, d) {
             return Err(PipelineError::invalid(
@@ -131,6 +134,20 @@ fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
         }
     }
     Ok(())
+}
+
+/// The job's document text hint resolved against its document ([`crate::evaluation::DocumentText::resolve`]),
+/// and checked to fit the retinal grid.
+fn document_text(
+    spec: &JobSpec,
+    text: &crate::evaluation::DocumentText,
+) -> Result<crate::evaluation::DocumentText, PipelineError> {
+    let bad = |e: crate::evaluation::KnownFontError| PipelineError::invalid("options.document_text", e.to_string());
+    let resolved = text.resolve(&spec.document).map_err(bad)?;
+    let (w, h) = spec.document.dimensions();
+    crate::evaluation::KnownFontAttacker::new(&resolved, w, h, spec.display.holes_x, spec.display.holes_y)
+        .map_err(bad)?;
+    Ok(resolved)
 }
 
 /// Transport options of everybody but the target: no derivatives.
@@ -537,7 +554,12 @@ fn evaluate_job(
     cancel: &AtomicBool,
 ) -> Result<crate::evaluation::Evaluation, PipelineError> {
     use crate::evaluation::{evaluate, EvaluationError, EvaluationOptions};
+    let document_text = match &spec.options.document_text {
+        Some(t) => Some(document_text(spec, t)?),
+        None => None,
+    };
     let eval_opts = EvaluationOptions {
+        document_text,
         population: spec.options.evaluation_population,
         seed: spec.options.seed.wrapping_add(20_000),
         sub_rays: spec.options.sub_rays,
@@ -584,4 +606,61 @@ pub fn write_evaluation(evaluation: &crate::evaluation::Evaluation, dir: &Path) 
         files.push(path);
     }
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::DocumentText;
+
+    fn pin_job(hint: DocumentText) -> JobSpec {
+        let display = DisplayGeometry {
+            holes_x: 28,
+            holes_y: 28,
+            ..DisplayGeometry::small()
+        };
+        JobSpec {
+            display,
+            target: VisionProfile::perfect(),
+            target_label: "pin".into(),
+            observers: vec![],
+            document: crate::imaging::glyphs::render_text(&["PIN", "4821"], 112, 112, 4),
+            decoy: None,
+            options: EncodeOptions {
+                optics: crate::physics::observer::Optics::Geometric,
+                max_iterations: 5,
+                sub_rays: 2,
+                population_decoys: 0,
+                evaluation_population: 2,
+                document_text: Some(hint),
+                ..Default::default()
+            },
+        }
+    }
+
+    #[test]
+    fn a_document_text_hint_is_resolved_for_the_evaluation_and_a_wrong_one_refused_before_the_solve() {
+        let hint = |line: &str| DocumentText {
+            lines: vec!["PIN".into(), line.into()],
+            scale: 4,
+            alphabet: "0123456789".into(),
+        };
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let dir = tempfile::tempdir().unwrap();
+        let wrong = run_job(&pin_job(hint("4*3*")), dir.path(), &cache, &|_| {}, &cancel).unwrap_err();
+        assert!(
+            matches!(&wrong, PipelineError::Invalid { field, .. } if field == "options.document_text"),
+            "{wrong}"
+        );
+        assert!(
+            std::fs::read_dir(dir.path()).unwrap().next().is_none(),
+            "nothing written"
+        );
+        let out = run_job(&pin_job(hint("****")), dir.path(), &cache, &|_| {}, &cancel).unwrap();
+        let report = out.evaluation.unwrap();
+        let read = report.target.known_font.expect("the target's view was read");
+        assert_eq!((read.characters, read.chance), (4, 1e-4));
+        assert!(report.population.unwrap().people.iter().all(|p| p.known_font.is_some()));
+    }
 }

@@ -29,12 +29,104 @@ pub struct DocumentText {
     pub alphabet: String,
 }
 
+/// A secret character of a layout hint whose value is read from the document itself (see
+/// [`DocumentText::resolve`]): a hint can then describe a PIN slip's layout without holding the PIN.
+pub const MASK: char = '*';
+
+impl DocumentText {
+    /// Checks the hint's size: 1–16 lines of at most 64 characters, 1–64 pixels per font dot, an alphabet of
+    /// at most 64 characters.
+    pub fn validate(&self) -> Result<(), KnownFontError> {
+        if self.lines.is_empty() || self.lines.len() > 16 || self.lines.iter().any(|l| l.chars().count() > 64) {
+            return Err(KnownFontError::Layout("1 to 16 lines of at most 64 characters".into()));
+        }
+        if !(1..=64).contains(&self.scale) {
+            return Err(KnownFontError::Layout(format!(
+                "scale must be within 1..=64, got {}",
+                self.scale
+            )));
+        }
+        if self.alphabet.chars().count() > 64 {
+            return Err(KnownFontError::Alphabet("at most 64 characters".into()));
+        }
+        Ok(())
+    }
+
+    /// The hint with every [`MASK`] replaced by the character the document shows there, and every secret
+    /// character checked against the document: the known-font attacker reads the document itself (at its own
+    /// resolution) and must find each cell's glyph with a correlation of at least 0.9.
+    pub fn resolve(&self, document: &RgbImage) -> Result<DocumentText, KnownFontError> {
+        self.validate()?;
+        let alphabet: Vec<char> = self.alphabet.chars().map(|c| c.to_ascii_uppercase()).collect();
+        let placeholder = *alphabet
+            .first()
+            .ok_or_else(|| KnownFontError::Alphabet("is empty".into()))?;
+        let probe = DocumentText {
+            lines: self
+                .lines
+                .iter()
+                .map(|l| l.chars().map(|c| if c == MASK { placeholder } else { c }).collect())
+                .collect(),
+            ..self.clone()
+        };
+        let (w, h) = document.dimensions();
+        let attacker = KnownFontAttacker::new(&probe, w, h, w, h)?;
+        let lum = image_luminance(document);
+        let mut read = Vec::with_capacity(attacker.cells.len());
+        for cell in &attacker.cells {
+            let scores = attacker
+                .cell_scores(cell, &lum, 0, 0)
+                .expect("an unshifted cell lies inside the document");
+            let (k, best) = scores
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .expect("an alphabet has two characters or more");
+            if *best < 0.9 {
+                return Err(KnownFontError::DoesNotMatch(format!(
+                    "no character of the alphabet is drawn at secret character {} (best correlation {best:.2})",
+                    read.len()
+                )));
+            }
+            read.push(attacker.alphabet[k]);
+        }
+        // Secret cells come in text order; masks take what was read, given characters must agree with it.
+        let mut next = read.into_iter();
+        let mut lines = Vec::with_capacity(self.lines.len());
+        for line in &self.lines {
+            let mut out = String::new();
+            for c in line.chars() {
+                let secret = c == MASK || attacker.alphabet.contains(&c.to_ascii_uppercase());
+                if !secret {
+                    out.push(c);
+                    continue;
+                }
+                let shown = next.next().expect("one reading per secret cell");
+                if c != MASK && c.to_ascii_uppercase() != shown {
+                    return Err(KnownFontError::DoesNotMatch(format!(
+                        "the hint says '{c}' where the document shows '{shown}'"
+                    )));
+                }
+                out.push(shown);
+            }
+            lines.push(out);
+        }
+        Ok(DocumentText { lines, ..self.clone() })
+    }
+}
+
 /// Why a known-font attacker cannot be made.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum KnownFontError {
     /// The alphabet has a character the font cannot draw, or fewer than two characters.
     #[error("alphabet: {0}")]
     Alphabet(String),
+    /// The hint's lines or scale are out of range.
+    #[error("layout: {0}")]
+    Layout(String),
+    /// The hint does not describe the document.
+    #[error("the hint does not match the document: {0}")]
+    DoesNotMatch(String),
     /// No character of the text is in the alphabet.
     #[error("the text has no character of the alphabet: nothing is secret")]
     NothingSecret,
@@ -330,6 +422,38 @@ mod tests {
             })
             .count();
         assert_eq!(right, 0);
+    }
+
+    /// A layout hint with the digits masked is resolved to the digits the document shows; a hint that names a
+    /// different digit, or a layout that puts the digits elsewhere, is refused.
+    #[test]
+    fn a_masked_hint_is_resolved_from_the_document_and_a_wrong_one_refused() {
+        let (text, doc) = pin("4821");
+        let masked = DocumentText {
+            lines: vec!["PIN".into(), "****".into()],
+            ..text.clone()
+        };
+        assert_eq!(masked.resolve(&doc).unwrap(), text);
+        let half = DocumentText {
+            lines: vec!["PIN".into(), "4*2*".into()],
+            ..text.clone()
+        };
+        assert_eq!(half.resolve(&doc).unwrap(), text);
+        let wrong = DocumentText {
+            lines: vec!["PIN".into(), "4*3*".into()],
+            ..text.clone()
+        };
+        assert!(matches!(wrong.resolve(&doc), Err(KnownFontError::DoesNotMatch(m)) if m.contains("'3'")));
+        let elsewhere = DocumentText {
+            lines: vec!["****".into(), "PIN".into()],
+            ..text.clone()
+        };
+        assert!(matches!(elsewhere.resolve(&doc), Err(KnownFontError::DoesNotMatch(_))));
+        let too_many = DocumentText {
+            lines: vec!["*".into(); 17],
+            ..text
+        };
+        assert!(matches!(too_many.resolve(&doc), Err(KnownFontError::Layout(_))));
     }
 
     #[test]

@@ -21,7 +21,8 @@ pub struct ViewScore {
     /// What the known-font attacker read, when the document's text is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font: Option<crate::evaluation::KnownFontRead>,
-    /// Legibility ≥ threshold, or the known-font attacker read every secret character.
+    /// The known-font attacker read every secret character (when the document's text is known); otherwise
+    /// legibility ≥ threshold.
     pub readable: bool,
 }
 
