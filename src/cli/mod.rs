@@ -135,7 +135,7 @@ pub enum ExperimentCommand {
         #[arg(long, default_value = "docs/experiments/headbox")]
         out: PathBuf,
         /// People sampled at the design position per encoding.
-        #[arg(long, default_value_t = 60)]
+        #[arg(long, default_value_t = 1000)]
         population: u32,
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]

@@ -23,6 +23,81 @@ struct Encoding {
     label: &'static str,
     decoys: u32,
     decoy_weight: f64,
+    /// The target stacked on a ring of this radius (mm; 0 = only the design position).
+    head_radius_mm: f64,
+}
+
+/// What both experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
+struct Baseline {
+    display: eyekey_core::physics::display::DisplayGeometry,
+    target: eyekey_core::physics::profile::VisionProfile,
+    document: image::RgbImage,
+    text: eyekey_core::evaluation::DocumentText,
+    cache: TransportCache,
+}
+
+impl Baseline {
+    fn new() -> Result<Self> {
+        let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
+        display.validate()?;
+        let g = (display.holes_x * 4, display.holes_y * 4);
+        Ok(Self {
+            display,
+            target: sampled_target(),
+            document: pin_slip(g.0, g.1),
+            text: pin_slip_text(g.0),
+            cache: TransportCache::default(),
+        })
+    }
+
+    /// Encodes the PIN slip with `e`'s decoys and stacked target (12 sub-rays, seed 5); returns the light field
+    /// and the seconds it took.
+    fn encode(&self, e: &Encoding, max_iterations: u32) -> Result<(Vec<f32>, f64)> {
+        let t = Instant::now();
+        let spec = JobSpec {
+            display: self.display.clone(),
+            target: self.target.clone(),
+            target_label: e.label.into(),
+            observers: vec![],
+            document: self.document.clone(),
+            decoy: None,
+            options: EncodeOptions {
+                population_decoys: e.decoys,
+                decoy_weight: e.decoy_weight,
+                head_radius_mm: e.head_radius_mm,
+                max_iterations,
+                sub_rays: 12,
+                seed: 5,
+                optics: Optics::Wave,
+                ..Default::default()
+            },
+        };
+        let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
+        Ok((enc.light_field, t.elapsed().as_secs_f64()))
+    }
+
+    /// Evaluates light field `l` for the target with `options`; returns the evaluation and its seconds.
+    fn evaluate(
+        &self,
+        l: &[f32],
+        options: &EvaluationOptions,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Result<(eyekey_core::evaluation::Evaluation, f64)> {
+        let t = Instant::now();
+        let ev = evaluate(
+            &self.display,
+            l,
+            &self.document,
+            OBJECTIVE_LEVEL,
+            &self.target,
+            &[],
+            options,
+            &self.cache,
+            progress,
+            &AtomicBool::new(false),
+        )?;
+        Ok((ev, t.elapsed().as_secs_f64()))
+    }
 }
 
 fn score_cell(s: Option<&ViewScore>) -> String {
@@ -81,51 +156,35 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
 /// `out/bystanders.json` and each encoding's pictures; returns the Markdown.
 pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
     std::fs::create_dir_all(out)?;
-    let cache = TransportCache::default();
-    let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
-    display.validate()?;
-    let target = sampled_target();
-    let g = (display.holes_x * 4, display.holes_y * 4);
-    let document = pin_slip(g.0, g.1);
+    let base = Baseline::new()?;
     let encodings = [
         Encoding {
             label: "no decoys",
             decoys: 0,
             decoy_weight: 0.0,
+            head_radius_mm: 0.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
             decoys: 6,
             decoy_weight: 0.3,
+            head_radius_mm: 0.0,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, the target stacked on a 5 mm ring",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 5.0,
         },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
     for (k, e) in encodings.iter().enumerate() {
-        let t = Instant::now();
-        let spec = JobSpec {
-            display: display.clone(),
-            target: target.clone(),
-            target_label: "bystanders".into(),
-            observers: vec![],
-            document: document.clone(),
-            decoy: None,
-            options: EncodeOptions {
-                population_decoys: e.decoys,
-                decoy_weight: e.decoy_weight,
-                max_iterations,
-                sub_rays: 12,
-                seed: 5,
-                optics: Optics::Wave,
-                ..Default::default()
-            },
-        };
-        let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
-        let t_encode = t.elapsed().as_secs_f64();
+        let (l, t_encode) = base.encode(e, max_iterations)?;
         let options = EvaluationOptions {
             population: 0,
             optics: Optics::Wave,
-            document_text: Some(pin_slip_text(g.0)),
+            document_text: Some(base.text.clone()),
             sub_rays: 12,
             key_directions: 0,
             head_offsets_mm: vec![],
@@ -142,26 +201,14 @@ pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
             ..Default::default()
         };
         let t = Instant::now();
-        let ev = evaluate(
-            &display,
-            &enc.light_field,
-            &document,
-            OBJECTIVE_LEVEL,
-            &target,
-            &[],
-            &options,
-            &cache,
-            &|p| {
-                eprint!(
-                    "\r{}: evaluation {:.0} % ({:.0} s)",
-                    e.label,
-                    100.0 * p,
-                    t.elapsed().as_secs_f64()
-                )
-            },
-            &AtomicBool::new(false),
-        )?;
-        let t_eval = t.elapsed().as_secs_f64();
+        let (ev, t_eval) = base.evaluate(&l, &options, &|p| {
+            eprint!(
+                "\r{}: evaluation {:.0} % ({:.0} s)",
+                e.label,
+                100.0 * p,
+                t.elapsed().as_secs_f64()
+            )
+        })?;
         let dir = out.join(format!("encoding_{k}"));
         eyekey_core::encoding::pipeline::write_evaluation(&ev, &dir)?;
         let r = &ev.report;
@@ -255,23 +302,20 @@ fn head_rings(
 /// `out/headbox.md`.
 pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<String> {
     std::fs::create_dir_all(out)?;
-    let cache = TransportCache::default();
-    let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
-    let target = sampled_target();
-    let g = (display.holes_x * 4, display.holes_y * 4);
-    let document = pin_slip(g.0, g.1);
-    let text = pin_slip_text(g.0);
+    let base = Baseline::new()?;
+    let (display, target, document, text, cache) =
+        (&base.display, &base.target, &base.document, &base.text, &base.cache);
     let reference = eyekey_core::evaluation::Reference::new(
-        &document,
+        document,
         display.holes_x,
         display.holes_y,
         OBJECTIVE_LEVEL,
         eyekey_core::evaluation::DEFAULT_THRESHOLD,
     )
     .with_known_font(eyekey_core::evaluation::KnownFontAttacker::new(
-        &text,
-        g.0,
-        g.1,
+        text,
+        document.width(),
+        document.height(),
         display.holes_x,
         display.holes_y,
     )?);
@@ -280,6 +324,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
         "frames",
         "encode",
         "people at the design position who read (95 % CI)",
+        "their evaluation",
         "target at 0 / 1 / 2 / 3 / 4 / 5 mm: worst legibility (ring positions read by the known-font attacker, of 4)",
     ]);
     for (label, head_radius_mm, method) in [
@@ -295,35 +340,21 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
         ),
         ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed),
         ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed),
+        (
+            "target stacked on a 5 mm ring, re-indexed for the tracked eye",
+            5.0,
+            HeadBoxMethod::Tracked,
+        ),
     ] {
-        let t = Instant::now();
-        let spec = JobSpec {
-            display: display.clone(),
-            target: target.clone(),
-            target_label: "head box".into(),
-            observers: vec![],
-            document: document.clone(),
-            decoy: None,
-            options: EncodeOptions {
-                population_decoys: 6,
-                decoy_weight: 0.3,
-                head_radius_mm,
-                max_iterations,
-                sub_rays: 12,
-                seed: 5,
-                optics: Optics::Wave,
-                ..Default::default()
-            },
+        let encoding = Encoding {
+            label,
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm,
         };
-        let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
-        let t_encode = t.elapsed().as_secs_f64();
-        let ev = evaluate(
-            &display,
-            &enc.light_field,
-            &document,
-            OBJECTIVE_LEVEL,
-            &target,
-            &[],
+        let (l, t_encode) = base.encode(&encoding, max_iterations)?;
+        let (ev, t_eval) = base.evaluate(
+            &l,
             &EvaluationOptions {
                 population,
                 optics: Optics::Wave,
@@ -334,24 +365,14 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
                 camera_focus_d: vec![],
                 ..Default::default()
             },
-            &cache,
             &|_| {},
-            &AtomicBool::new(false),
         )?;
         let p = ev.report.population.as_ref().expect("a population was asked for");
-        let rings = head_rings(
-            &display,
-            &enc.light_field,
-            &target,
-            &reference,
-            method,
-            &offsets,
-            &cache,
-        )?;
+        let rings = head_rings(display, &l, target, &reference, method, &offsets, cache)?;
         let cells: Vec<String> = rings.iter().map(|(_, w, read)| format!("{w:.2} ({read})")).collect();
         writeln!(
             md,
-            "| {label} | {t_encode:.0} s | {} of {} ({:.0}–{:.0} %) | {} |",
+            "| {label} | {t_encode:.0} s | {} of {} ({:.1}–{:.1} %) | {t_eval:.0} s | {} |",
             p.readable_count,
             p.count,
             100.0 * p.readable_ci95.0,

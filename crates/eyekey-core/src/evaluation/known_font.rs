@@ -20,7 +20,8 @@ use crate::imaging::{self, glyphs};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct DocumentText {
-    /// The lines, as rendered.
+    /// The lines, as rendered; in a hint, a secret character may be written `*` and is then read from the
+    /// document (see [`DocumentText::resolve`]).
     pub lines: Vec<String>,
     /// Pixels per font dot, as rendered.
     pub scale: u32,

@@ -121,6 +121,9 @@ pub fn evaluate(
     Ok(Evaluation { report, pictures })
 }
 
+/// What the camera sweep hands each setting: its label, the channel's luminance, its white, the retinal grid.
+type CameraVisit<'a> = dyn FnMut(&str, &[f32], f64, &RetinalGrid) + 'a;
+
 /// One evaluation's shared state: what is looked at, with which transport, and the pictures kept so far.
 struct Evaluator<'a> {
     display: &'a DisplayGeometry,
@@ -207,50 +210,75 @@ impl Evaluator<'_> {
     /// The camera attacker: ideal optics, focus swept, several apertures, an RGB sensor with and without a
     /// narrow filter per projector band; each channel judged alone; its best case is reported.
     fn camera(&mut self) -> Result<Option<CameraSummary>, EvaluationError> {
-        let (display, options) = (self.display, self.options);
+        let options = self.options;
         if options.camera_focus_d.is_empty() || options.camera_apertures_mm.is_empty() {
             return Ok(None);
         }
         let g = (self.reference.width as u32, self.reference.height as u32);
-        let rgb = coupling(&display.projectors, &camera_rgb()).c;
         let mut tried = Vec::new();
         let mut best: Option<(ViewScore, RgbImage)> = None;
-        for &aperture in &options.camera_apertures_mm {
-            for &focus in &options.camera_focus_d {
+        self.camera_sweep(
+            EyePosition::default(),
+            &options.camera_focus_d,
+            &options.camera_apertures_mm,
+            &mut |setting, lum, white, _| {
+                let s = self.reference.score(&format!("camera {setting}"), lum, white);
+                if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
+                    // The attacker's picture: the channel stretched to its own range, shown in grey.
+                    let stretched = stretch_to_unit(lum);
+                    let pic = RgbImage::from_fn(g.0, g.1, |x, y| {
+                        let b = (stretched[(y * g.0 + x) as usize].clamp(0.0, 1.0) * 255.0) as u8;
+                        Rgb([b, b, b])
+                    });
+                    best = Some((s.clone(), pic));
+                }
+                tried.push(s);
+            },
+        )?;
+        Ok(best.map(|(b, pic)| {
+            self.pictures.push(("camera_best.png".to_string(), pic));
+            CameraSummary { best: b, tried }
+        }))
+    }
+
+    /// The camera attacker's settings at `eye`: an ideal lens at every focus and aperture, behind the sensor's
+    /// R, G and B and behind a filter per projector band; `visit` gets each setting's label, the channel's
+    /// luminance, its white and the retinal grid.
+    fn camera_sweep(
+        &self,
+        eye: EyePosition,
+        focus_d: &[f64],
+        apertures_mm: &[f64],
+        visit: &mut CameraVisit<'_>,
+    ) -> Result<(), EvaluationError> {
+        let display = self.display;
+        let rgb = coupling(&display.projectors, &camera_rgb()).c;
+        for &aperture in apertures_mm {
+            for &focus in focus_d {
                 self.check()?;
                 let lens = camera_lens(focus, aperture);
                 let tr = transports(
                     display,
                     Lens::Achromat(&lens),
-                    EyePosition::default(),
+                    eye,
                     &self.topts,
-                    options.optics,
+                    self.options.optics,
                     self.cache,
                 )
                 .map_err(crate::physics::observer::ObserverError::from)?;
                 for (name, c) in camera_channels(&rgb, display.n_bands()) {
                     let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
-                    let view = cam.view(self.l);
-                    let lum: Vec<f32> = view.chunks_exact(3).map(|p| p[0]).collect();
-                    let label = format!("camera f={focus:+.1}D aperture={aperture}mm {name}");
-                    let s = self.reference.score(&label, &lum, cam.white[0]);
-                    if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
-                        // The attacker's picture: the channel stretched to its own range, shown in grey.
-                        let stretched = stretch_to_unit(&lum);
-                        let pic = RgbImage::from_fn(g.0, g.1, |x, y| {
-                            let b = (stretched[(y * g.0 + x) as usize].clamp(0.0, 1.0) * 255.0) as u8;
-                            Rgb([b, b, b])
-                        });
-                        best = Some((s.clone(), pic));
-                    }
-                    tried.push(s);
+                    let lum: Vec<f32> = cam.view(self.l).chunks_exact(3).map(|p| p[0]).collect();
+                    visit(
+                        &format!("f={focus:+.1}D aperture={aperture}mm {name}"),
+                        &lum,
+                        cam.white[0],
+                        &cam.grid(),
+                    );
                 }
             }
         }
-        Ok(best.map(|(b, pic)| {
-            self.pictures.push(("camera_best.png".to_string(), pic));
-            CameraSummary { best: b, tried }
-        }))
+        Ok(())
     }
 
     fn key_sensitivity(&self) -> Result<Option<KeySensitivity>, EvaluationError> {
@@ -272,26 +300,30 @@ impl Evaluator<'_> {
     }
 
     /// The target's worst legibility on rings of the configured radii, and the largest radius up to which
-    /// the target still reads.
+    /// the target still reads at every ring position (by the judge: the known-font attacker where the text is
+    /// known, the legibility threshold otherwise).
     fn head_movement(&self, target_readable: bool) -> Result<Option<HeadMovement>, EvaluationError> {
         let options = self.options;
         if options.head_offsets_mm.is_empty() {
             return Ok(None);
         }
-        let mut worst = Vec::new();
+        let (mut worst, mut all_read) = (Vec::new(), Vec::new());
         for &r in &options.head_offsets_mm {
             self.check()?;
-            let mut w = f64::INFINITY;
+            let (mut w, mut read) = (f64::INFINITY, true);
             for eye in head_ring(r) {
                 let o = self.observer(self.target, eye)?;
-                w = w.min(self.reference.score_observer("target moved", &o, self.l).0.legibility);
+                let s = self.reference.score_observer("target moved", &o, self.l).0;
+                w = w.min(s.legibility);
+                read &= s.readable;
             }
             worst.push(w);
+            all_read.push(read);
         }
         let mut radius = 0.0;
         if target_readable {
-            for (r, w) in options.head_offsets_mm.iter().zip(&worst) {
-                if *w >= options.threshold {
+            for (r, read) in options.head_offsets_mm.iter().zip(&all_read) {
+                if *read {
                     radius = *r;
                 } else {
                     break;
@@ -331,7 +363,6 @@ impl Evaluator<'_> {
         };
         bo.validate().map_err(EvaluationError::Bystanders)?;
         let display = self.display;
-        let rgb = coupling(&display.projectors, &camera_rgb()).c;
         let mut out = Vec::new();
         let mut best_view: Option<(f64, RgbImage)> = None;
         let positions = bo.positions(display);
@@ -363,32 +394,19 @@ impl Evaluator<'_> {
                 }
             }
             let (mut best_camera, mut camera_read, mut settings) = (None::<ViewScore>, 0, 0);
-            for &aperture in &bo.camera_apertures_mm {
-                for &focus in &bo.camera_focus_d {
-                    self.check()?;
-                    let lens = camera_lens(focus, aperture);
-                    let tr = transports(
-                        display,
-                        Lens::Achromat(&lens),
-                        eye,
-                        &self.topts,
-                        self.options.optics,
-                        self.cache,
-                    )
-                    .map_err(crate::physics::observer::ObserverError::from)?;
-                    for (name, c) in camera_channels(&rgb, display.n_bands()) {
-                        let cam = Observer::with_coupling(tr.clone(), c, display.l_max);
-                        let lum: Vec<f32> = cam.view(self.l).chunks_exact(3).map(|p| p[0]).collect();
-                        let label = format!("camera {at} f={focus:+.1}D aperture={aperture}mm {name}");
-                        let s = self.score_bystander(&label, &lum, cam.white[0], &cam.grid(), eye);
-                        settings += 1;
-                        camera_read += u32::from(s.readable);
-                        if best_camera.as_ref().is_none_or(|b| s.legibility > b.legibility) {
-                            best_camera = Some(s);
-                        }
+            self.camera_sweep(
+                eye,
+                &bo.camera_focus_d,
+                &bo.camera_apertures_mm,
+                &mut |setting, lum, white, grid| {
+                    let s = self.score_bystander(&format!("camera {at} {setting}"), lum, white, grid, eye);
+                    settings += 1;
+                    camera_read += u32::from(s.readable);
+                    if best_camera.as_ref().is_none_or(|b| s.legibility > b.legibility) {
+                        best_camera = Some(s);
                     }
-                }
-            }
+                },
+            )?;
             let distance_mm = (eye.x_mm.powi(2) + eye.y_mm.powi(2) + eye.dz_mm.powi(2)).sqrt();
             out.push(BystanderPosition {
                 eye,
