@@ -1,5 +1,5 @@
 //! Research commands: benchmarks, experiments and the legibility calibration that produce the figures in
-//! BENCHMARKS.md, docs/experiments.md and docs/legibility-calibration.md.
+//! BENCHMARKS.md, docs/experiments.md, docs/legibility-calibration.md and docs/legibility-ocr.md.
 
 pub mod bench;
 pub mod bystanders;

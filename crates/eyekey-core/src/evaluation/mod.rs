@@ -1,9 +1,11 @@
 //! Is it actually secret? Fidelity for the target and readability for everybody else (docs/design.md §4).
 //!
-//! Readability is judged contrast-invariantly: an attacker stretches contrast and denoises, so the score is
-//! the best |normalised cross-correlation| between the document's luminance and the view's luminance after
-//! Gaussian denoising at a few strengths ([`legibility`]). Its threshold is calibrated against OCR
-//! (see `docs/legibility-calibration.md`). Fidelity is PSNR and SSIM (Wang et al. 2004) against the objective.
+//! Where the document's text is known the known-font attacker ([`KnownFontAttacker`]) decides whether a view is
+//! read. Otherwise readability is judged contrast-invariantly: an attacker stretches contrast and denoises, so the
+//! score is the best |normalised cross-correlation| between the document's luminance and the view's luminance
+//! inside the box around the document's ink after Gaussian denoising at a few strengths ([`legibility`]); its
+//! threshold is calibrated against the known-font attacker (`docs/legibility-calibration.md`). Fidelity is PSNR
+//! and SSIM (Wang et al. 2004) against the objective.
 //!
 //! Every simulated view here uses a sub-ray jitter seed different from the encoder's, so an encoding cannot
 //! look good merely by fitting the sampling pattern of its own transport operator.
@@ -448,9 +450,10 @@ mod tests {
 
     #[test]
     fn a_plain_image_is_read_by_a_bystander_beside_the_target_and_not_from_far_outside_the_display() {
-        // A plain 2D image (every view of a lenslet equal) is the opposite of secret: 10 mm aside an eye sees
-        // it through the neighbouring blocks, shifted by two lenslets, and reads it once the shift is undone.
-        // 500 mm aside the screen lies outside every lenslet's line of sight: the view is dark and unread.
+        // A plain 2D image (every view of a lenslet equal) is the opposite of secret: two block periods aside
+        // (12.8 mm) an eye sees it through the blocks two over, shifted by two lenslets, and reads it once the
+        // shift is undone. (Between repeats the pupil straddles two blocks and sees a double image one lenslet
+        // apart.) 500 mm aside the screen lies outside every lenslet's line of sight: the view is dark and unread.
         let display = DisplayGeometry {
             holes_x: 32,
             holes_y: 32,
@@ -459,6 +462,7 @@ mod tests {
         let lines = ["PIN", "4821"];
         let document = crate::imaging::glyphs::render_text(&lines, 128, 128, 4);
         let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        let repeat = 2.0 * display.block_shift_at_pupil_mm(display.viewing_distance_mm);
         let options = EvaluationOptions {
             population: 0,
             sub_rays: 4,
@@ -471,7 +475,7 @@ mod tests {
                 alphabet: "0123456789".into(),
             }),
             bystanders: Some(BystanderOptions {
-                lateral_mm: vec![10.0, 500.0],
+                lateral_mm: vec![repeat, 500.0],
                 distances_mm: vec![],
                 people: 1,
                 camera_focus_d: vec![0.0],
@@ -495,9 +499,9 @@ mod tests {
         .unwrap();
         let b = ev.report.bystanders.unwrap();
         assert_eq!(b.positions.len(), 8);
-        assert_eq!(b.nearest_reader_mm, Some(10.0), "{:#?}", b.positions);
+        assert_eq!(b.nearest_reader_mm, Some(repeat), "{:#?}", b.positions);
         for p in &b.positions {
-            if p.distance_mm == 10.0 {
+            if p.distance_mm == repeat {
                 assert_eq!(p.people_read, 1, "{p:#?}");
                 assert!(p.relative_light > 0.5, "{p:#?}");
             } else {
