@@ -65,6 +65,8 @@ impl BystanderOptions {
                 });
             }
         }
+        // The target's own position is not a bystander's (a distance list may hold the design distance).
+        out.retain(|e| e.x_mm != 0.0 || e.y_mm != 0.0 || e.dz_mm != 0.0);
         out
     }
 
@@ -218,6 +220,12 @@ mod tests {
             ..Default::default()
         };
         assert!(bad.validate().is_err());
+        // The design distance in the list adds its lateral positions but not the target's own.
+        let with_design = BystanderOptions {
+            distances_mm: vec![500.0],
+            ..Default::default()
+        };
+        assert_eq!(with_design.positions(&d).len(), 24 + 2);
     }
 
     #[test]
@@ -262,6 +270,37 @@ mod tests {
                 assert!((back[y * w + x] - doc[y * w + x]).abs() < 1e-4, "({x}, {y})");
             }
         }
+        // Nearer than the design distance the blocks seen drift across the display (the view is magnified);
+        // unwarp's continuous mapping brings a smooth document back where the rounded blocks carry it.
+        let near = EyePosition {
+            x_mm: 20.0,
+            y_mm: 0.0,
+            dz_mm: -200.0,
+        };
+        let smooth: Vec<f32> = (0..w * h)
+            .map(|i| ((i % w) as f32 * 0.3).sin() + ((i / w) as f32 * 0.25).cos())
+            .collect();
+        let seen: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let k = block_seen(&d, 300.0, [near.x_mm, near.y_mm], d.hole_centre_mm(x as u32, y as u32));
+                let (bx, by) = (
+                    (x as i64 + k[0]).clamp(0, w as i64 - 1),
+                    (y as i64 + k[1]).clamp(0, h as i64 - 1),
+                );
+                smooth[by as usize * w + bx as usize]
+            })
+            .collect();
+        let back = unwarp(&seen, &grid, &d, near);
+        let inner = |v: &[f32]| -> Vec<f32> {
+            (4..h - 4)
+                .flat_map(|y| (8..w - 8).map(move |x| (x, y)))
+                .map(|(x, y)| v[y * w + x])
+                .collect()
+        };
+        let restored = crate::evaluation::ncc(&inner(&back), &inner(&smooth));
+        let raw = crate::evaluation::ncc(&inner(&seen), &inner(&smooth));
+        assert!(restored > 0.95 && raw < 0.8, "restored {restored}, raw {raw}");
         // The design position is the identity.
         let same = unwarp(&doc, &grid, &d, EyePosition::default());
         assert!(same.iter().zip(&doc).all(|(a, b)| (a - b).abs() < 1e-3));

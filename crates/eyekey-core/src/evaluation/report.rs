@@ -47,8 +47,8 @@ pub struct PopulationSummary {
     pub p95_legibility: f64,
     /// Highest legibility.
     pub max_legibility: f64,
-    /// Fraction of people at or above each of several legibility levels, as (level, fraction): a reader
-    /// better than OCR (a person who knows the font) reads below the calibrated threshold.
+    /// Fraction of people at or above each of several legibility levels, as (level, fraction): the continuous
+    /// figure beside the judge's count (the calibrated threshold is among the levels).
     pub fraction_at_or_above: Vec<(f64, f64)>,
     /// Every person's score.
     pub people: Vec<ViewScore>,
@@ -76,10 +76,12 @@ impl PopulationSummary {
             median_legibility: percentile(&legs, 0.5),
             p95_legibility: percentile(&legs, 0.95),
             max_legibility: legs.last().copied().unwrap_or(0.0),
-            fraction_at_or_above: [0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6]
-                .iter()
-                .map(|&t| (t, fraction(t)))
-                .collect(),
+            fraction_at_or_above: {
+                let mut levels = vec![0.2, 0.3, DEFAULT_THRESHOLD, 0.5, 0.6];
+                levels.sort_by(f64::total_cmp);
+                levels.dedup();
+                levels.iter().map(|&t| (t, fraction(t))).collect()
+            },
             people: scores,
         }
     }
