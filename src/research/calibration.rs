@@ -197,7 +197,7 @@ fn score(doc: &RgbImage, pin: &str, scale: u32, o: &Observer, l: &[f32], kind: S
     let reference =
         Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD).with_known_font(attacker);
     let lum = luminance(&o.view(l));
-    let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
+    let white = eyekey_core::evaluation::luminance_of(o.white);
     let s = reference.score("", &lum, white);
     let read = s.known_font.expect("the reference has a known-font attacker");
     Ok(View {

@@ -25,6 +25,8 @@ pub struct Encoded {
     pub light_field: Vec<f32>,
     /// What the solver did.
     pub solver: SolverSummary,
+    /// The job's document text hint resolved against its document, for the evaluation.
+    pub document_text: Option<crate::evaluation::DocumentText>,
 }
 
 /// Encodes a job's document into a light field (no files written). Transport operators come from `cache`.
@@ -34,7 +36,7 @@ pub fn encode(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Encoded, PipelineError> {
-    validate_spec(spec)?;
+    let document_text = validate_spec(spec)?;
     let o = &spec.options;
     let mut cast = Cast::build(spec, cache, progress, cancel)?;
     let tied = o.ablation == Some(Ablation::Spectral);
@@ -88,11 +90,13 @@ pub fn encode(
     Ok(Encoded {
         light_field: l,
         solver: summary,
+        document_text,
     })
 }
 
-/// Checks that the job's inputs fit together; errors name the input.
-fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
+/// Checks that the job's inputs fit together; errors name the input. Returns the document text hint resolved
+/// against the document.
+fn validate_spec(spec: &JobSpec) -> Result<Option<crate::evaluation::DocumentText>, PipelineError> {
     spec.options.validate()?;
     let d = &spec.display;
     d.validate()
@@ -116,9 +120,10 @@ fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
             ),
         ));
     }
-    if let Some(text) = &spec.options.document_text {
-        document_text(spec, text)?;
-    }
+    let document_text = match &spec.options.document_text {
+        Some(text) => Some(document_text(spec, text)?),
+        None => None,
+    };
     if let Some(decoy) = &spec.decoy {
         if !aspect_matches(decoy, d) {
             return Err(PipelineError::invalid(
@@ -133,7 +138,7 @@ fn validate_spec(spec: &JobSpec) -> Result<(), PipelineError> {
             ));
         }
     }
-    Ok(())
+    Ok(document_text)
 }
 
 /// The job's document text hint resolved against its document ([`crate::evaluation::DocumentText::resolve`]),
@@ -554,12 +559,8 @@ fn evaluate_job(
     cancel: &AtomicBool,
 ) -> Result<crate::evaluation::Evaluation, PipelineError> {
     use crate::evaluation::{evaluate, EvaluationError, EvaluationOptions};
-    let document_text = match &spec.options.document_text {
-        Some(t) => Some(document_text(spec, t)?),
-        None => None,
-    };
     let eval_opts = EvaluationOptions {
-        document_text,
+        document_text: encoded.document_text.clone(),
         population: spec.options.evaluation_population,
         seed: spec.options.seed.wrapping_add(20_000),
         sub_rays: spec.options.sub_rays,

@@ -4,7 +4,7 @@
 //! For every secret cell (a character of the document's text that belongs to the alphabet) the attacker holds a
 //! template per candidate glyph: the document with only that glyph drawn, resized to the retinal grid exactly as
 //! the document is ([`crate::imaging::resize`]), cropped to the character's 6×9-dot cell. It reads the view after
-//! each denoising strength of [`DENOISE_SIGMAS`] and in both polarities (a negative image is as readable as a
+//! each denoising strength of [`crate::evaluation::DENOISE_SIGMAS`] and in both polarities (a negative image is as readable as a
 //! positive one) and with the whole text moved by up to ±1 grid pixel either way: per cell, the candidate with
 //! the highest normalised cross-correlation. Of those (denoising, shift, polarity) readings it answers with the
 //! one it is most confident of (the highest mean winning correlation): one answer, so its chance of guessing right is |alphabet|^−n for n secret
@@ -13,7 +13,7 @@
 use image::{Rgb, RgbImage};
 use serde::{Deserialize, Serialize};
 
-use crate::evaluation::{gaussian_blur, image_luminance, ncc, DENOISE_SIGMAS};
+use crate::evaluation::{image_luminance, ncc};
 use crate::imaging::{self, glyphs};
 
 /// The text of a document drawn by [`glyphs::render_text`], and which of its characters are secret.
@@ -276,16 +276,21 @@ impl KnownFontAttacker {
     /// Reads a luminance view (row-major on the grid).
     pub fn read(&self, view: &[f32]) -> KnownFontRead {
         assert_eq!(view.len(), self.width * self.height, "view size");
+        self.read_denoised(&crate::evaluation::denoised(view, self.width, self.height))
+    }
+
+    /// Reads a view already denoised at each of [`crate::evaluation::DENOISE_SIGMAS`] ([`crate::evaluation::denoised`]).
+    pub fn read_denoised(&self, denoised: &[Vec<f32>]) -> KnownFontRead {
         let mut best: Option<(f64, Vec<char>)> = None;
-        for &sigma in &DENOISE_SIGMAS {
-            let v = gaussian_blur(view, self.width, self.height, sigma);
+        for v in denoised {
+            assert_eq!(v.len(), self.width * self.height, "view size");
             for dy in -1isize..=1 {
                 for dx in -1isize..=1 {
                     // The whole text moves together: per cell and candidate, the correlation at this shift.
                     let Some(scores) = self
                         .cells
                         .iter()
-                        .map(|c| self.cell_scores(c, &v, dx, dy))
+                        .map(|c| self.cell_scores(c, v, dx, dy))
                         .collect::<Option<Vec<_>>>()
                     else {
                         continue;

@@ -21,6 +21,11 @@ pub fn luminance(lms: &[f32]) -> Vec<f32> {
         .collect()
 }
 
+/// [`luminance`] of one LMS triple (a viewer's display white, say).
+pub fn luminance_of(lms: [f64; 3]) -> f64 {
+    0.689_902_7 * lms[0] + 0.348_321_9 * lms[1]
+}
+
 /// Luminance (Rec. 709 / sRGB weights on linear RGB) of an sRGB image, row-major.
 pub fn image_luminance(img: &RgbImage) -> Vec<f32> {
     imaging::linear_rgb(img)
@@ -127,6 +132,14 @@ pub fn ink_box(document: &[f32], width: usize, height: usize, margin: usize) -> 
     )
 }
 
+/// The view denoised at each of [`DENOISE_SIGMAS`], in that order: what every attacker starts from.
+pub fn denoised(view: &[f32], width: usize, height: usize) -> Vec<Vec<f32>> {
+    DENOISE_SIGMAS
+        .iter()
+        .map(|&s| gaussian_blur(view, width, height, s))
+        .collect()
+}
+
 /// [`legibility`] in a given box of the grid (x0, y0, x1, y1, exclusive ends): the view is denoised whole, then
 /// correlated with the document inside the box only.
 pub fn legibility_in(
@@ -136,6 +149,16 @@ pub fn legibility_in(
     height: usize,
     b: (usize, usize, usize, usize),
 ) -> f64 {
+    legibility_of_denoised(&denoised(view, width, height), document, width, b)
+}
+
+/// [`legibility_in`] of a view already denoised ([`denoised`]); `width` is the grid's.
+pub fn legibility_of_denoised(
+    denoised: &[Vec<f32>],
+    document: &[f32],
+    width: usize,
+    b: (usize, usize, usize, usize),
+) -> f64 {
     let crop = |img: &[f32]| -> Vec<f32> {
         (b.1..b.3)
             .flat_map(|y| (b.0..b.2).map(move |x| (x, y)))
@@ -143,10 +166,7 @@ pub fn legibility_in(
             .collect()
     };
     let doc = crop(document);
-    DENOISE_SIGMAS
-        .iter()
-        .map(|&s| ncc(&crop(&gaussian_blur(view, width, height, s)), &doc).abs())
-        .fold(0.0, f64::max)
+    denoised.iter().map(|v| ncc(&crop(v), &doc).abs()).fold(0.0, f64::max)
 }
 
 /// PSNR in dB of `a` against reference `b` for a peak value `peak`.

@@ -87,8 +87,11 @@ pub fn evaluate(
     let objective = t_obs.objective(document, level);
     ev.pictures
         .push(("objective.png".to_string(), t_obs.picture(&objective)));
-    let (target_score, pic) = ev.reference.score_observer("target", &t_obs, l);
-    ev.pictures.push(("target.png".to_string(), pic));
+    let target_view = t_obs.view(l);
+    let target_score = ev.reference.score_lms("target", &target_view, t_obs.white);
+    ev.pictures
+        .push(("target.png".to_string(), t_obs.picture(&target_view)));
+    let target_light = mean(&luminance(&target_view));
     let observer_scores = ev.observers(observers)?;
     progress(0.1);
     let population = ev.population(&|p| progress(0.1 + 0.5 * p))?;
@@ -98,7 +101,6 @@ pub fn evaluate(
     progress(0.9);
     let head_movement = ev.head_movement(target_score.readable)?;
     progress(0.95);
-    let target_light = mean_luminance(&t_obs, l);
     let bystanders = ev.bystanders(target_light, &|p| progress(0.95 + 0.05 * p))?;
     progress(1.0);
 
@@ -385,7 +387,7 @@ impl Evaluator<'_> {
                 let view = o.view(self.l);
                 let lum = luminance(&view);
                 light += mean(&lum);
-                let white = 0.689_902_7 * o.white[0] + 0.348_321_9 * o.white[1];
+                let white = luminance_of(o.white);
                 let s = self.score_bystander(&format!("bystander {at} person {i}"), &lum, white, &o.grid(), eye);
                 people_read += u32::from(s.readable);
                 if best_view.as_ref().is_none_or(|(b, _)| s.legibility > *b) {
@@ -437,11 +439,6 @@ impl Evaluator<'_> {
 /// Mean of a luminance image.
 fn mean(v: &[f32]) -> f64 {
     v.iter().map(|x| *x as f64).sum::<f64>() / v.len().max(1) as f64
-}
-
-/// Mean luminance of what `o` sees of `l`.
-fn mean_luminance(o: &Observer, l: &[f32]) -> f64 {
-    mean(&luminance(&o.view(l)))
 }
 
 #[cfg(test)]

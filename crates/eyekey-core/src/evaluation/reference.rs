@@ -1,6 +1,8 @@
 //! The document as the evaluation sees it: luminance on the retinal grid at the objective's level.
 
-use crate::evaluation::{image_luminance, ink_box, legibility_in, luminance, ncc, psnr, ssim, ViewScore, INK_MARGIN};
+use crate::evaluation::{
+    denoised, image_luminance, ink_box, legibility_of_denoised, luminance, ncc, psnr, ssim, ViewScore, INK_MARGIN,
+};
 use crate::imaging;
 use crate::physics::observer::Observer;
 use image::RgbImage;
@@ -48,13 +50,15 @@ impl Reference {
 
     /// Scores a luminance view; `white_luminance` is the viewer's luminance of the display's full white.
     pub fn score(&self, label: &str, view_luminance: &[f32], white_luminance: f64) -> ViewScore {
-        let leg = legibility_in(view_luminance, &self.document, self.width, self.height, self.ink_box);
+        // Denoised once, for the legibility score and the known-font attacker alike.
+        let denoised = denoised(view_luminance, self.width, self.height);
+        let leg = legibility_of_denoised(&denoised, &self.document, self.width, self.ink_box);
         let norm: Vec<f32> = view_luminance
             .iter()
             .map(|v| (*v as f64 / white_luminance) as f32)
             .collect();
         let objective: Vec<f32> = self.document.iter().map(|v| (*v as f64 * self.level) as f32).collect();
-        let known_font = self.known_font.as_ref().map(|a| a.read(view_luminance));
+        let known_font = self.known_font.as_ref().map(|a| a.read_denoised(&denoised));
         let read = known_font.as_ref().is_some_and(|k| k.correct);
         ViewScore {
             label: label.to_string(),
@@ -81,7 +85,7 @@ impl Reference {
 
     /// Scores an LMS view (`[r·3 + a]`) seen by a viewer whose display white is `white_lms`.
     pub fn score_lms(&self, label: &str, view: &[f32], white_lms: [f64; 3]) -> ViewScore {
-        let white = 0.689_902_7 * white_lms[0] + 0.348_321_9 * white_lms[1];
+        let white = crate::evaluation::luminance_of(white_lms);
         self.score(label, &luminance(view), white)
     }
 }
