@@ -141,6 +141,22 @@ pub enum ExperimentCommand {
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
     },
+    /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
+    /// the share of held-out people and of camera settings at the target's position that read.
+    Encoders {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/encoders")]
+        out: PathBuf,
+        /// Held-out people at the target's position per variant.
+        #[arg(long, default_value_t = 1000)]
+        population: u32,
+        /// Solver iteration cap per encoding.
+        #[arg(long, default_value_t = 200)]
+        max_iterations: u32,
+        /// Only the variants whose label contains this text.
+        #[arg(long)]
+        only: Option<String>,
+    },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
         /// Output directory (bundle/ and evaluation/).
@@ -508,6 +524,17 @@ pub fn run(cli: Cli) -> Result<()> {
             print!(
                 "{}",
                 crate::research::bystanders::headbox(&out, population, max_iterations)?
+            );
+        }
+        Command::Experiment(ExperimentCommand::Encoders {
+            out,
+            population,
+            max_iterations,
+            only,
+        }) => {
+            print!(
+                "{}",
+                crate::research::encoders::run(&out, population, max_iterations, only.as_deref())?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {

@@ -481,6 +481,7 @@ impl BenchProblem {
                 observer: o,
                 objective: obj.clone(),
                 weight: 1.0,
+                leak: None,
             })
             .collect();
         MultiplexObjective::new(terms, self.observers[0].coupling.len(), self.energy, self.tikhonov)

@@ -27,17 +27,17 @@ struct Encoding {
     head_radius_mm: f64,
 }
 
-/// What both experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
-struct Baseline {
-    display: eyekey_core::physics::display::DisplayGeometry,
-    target: eyekey_core::physics::profile::VisionProfile,
-    document: image::RgbImage,
-    text: eyekey_core::evaluation::DocumentText,
-    cache: TransportCache,
+/// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
+pub(super) struct Baseline {
+    pub(super) display: eyekey_core::physics::display::DisplayGeometry,
+    pub(super) target: eyekey_core::physics::profile::VisionProfile,
+    pub(super) document: image::RgbImage,
+    pub(super) text: eyekey_core::evaluation::DocumentText,
+    pub(super) cache: TransportCache,
 }
 
 impl Baseline {
-    fn new() -> Result<Self> {
+    pub(super) fn new() -> Result<Self> {
         let display = sweep_lenslet(32, 1.0, 9, 0.6, 500.0);
         display.validate()?;
         let g = (display.holes_x * 4, display.holes_y * 4);
@@ -50,34 +50,50 @@ impl Baseline {
         })
     }
 
-    /// Encodes the PIN slip with `e`'s decoys and stacked target (12 sub-rays, seed 5); returns the light field
-    /// and the seconds it took.
+    /// The experiments' encode options: 12 sub-rays, seed 5, wave optics, no decoys yet.
+    pub(super) fn options(max_iterations: u32) -> EncodeOptions {
+        EncodeOptions {
+            population_decoys: 0,
+            max_iterations,
+            sub_rays: 12,
+            seed: 5,
+            optics: Optics::Wave,
+            ..Default::default()
+        }
+    }
+
+    /// Encodes the PIN slip with `e`'s decoys and stacked target; returns the light field and the seconds it
+    /// took.
     fn encode(&self, e: &Encoding, max_iterations: u32) -> Result<(Vec<f32>, f64)> {
+        self.encode_with(
+            e.label,
+            EncodeOptions {
+                population_decoys: e.decoys,
+                decoy_weight: e.decoy_weight,
+                head_radius_mm: e.head_radius_mm,
+                ..Self::options(max_iterations)
+            },
+        )
+    }
+
+    /// Encodes the PIN slip with `options`; returns the light field and the seconds it took.
+    pub(super) fn encode_with(&self, label: &str, options: EncodeOptions) -> Result<(Vec<f32>, f64)> {
         let t = Instant::now();
         let spec = JobSpec {
             display: self.display.clone(),
             target: self.target.clone(),
-            target_label: e.label.into(),
+            target_label: label.into(),
             observers: vec![],
             document: self.document.clone(),
             decoy: None,
-            options: EncodeOptions {
-                population_decoys: e.decoys,
-                decoy_weight: e.decoy_weight,
-                head_radius_mm: e.head_radius_mm,
-                max_iterations,
-                sub_rays: 12,
-                seed: 5,
-                optics: Optics::Wave,
-                ..Default::default()
-            },
+            options,
         };
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
         Ok((enc.light_field, t.elapsed().as_secs_f64()))
     }
 
     /// Evaluates light field `l` for the target with `options`; returns the evaluation and its seconds.
-    fn evaluate(
+    pub(super) fn evaluate(
         &self,
         l: &[f32],
         options: &EvaluationOptions,
@@ -255,7 +271,7 @@ pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
 
 /// How the target's head box is served.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum HeadBoxMethod {
+pub(super) enum HeadBoxMethod {
     /// Frames encoded for the design position, shown as they are.
     Fixed,
     /// The same frames re-indexed for the tracked eye position (`physics::tracking::retarget`).
@@ -264,7 +280,7 @@ enum HeadBoxMethod {
 
 /// The target's worst reading on rings of `offsets` around the design position (right, left, up, down): the
 /// lowest legibility and how many of the ring's positions the known-font attacker read.
-fn head_rings(
+pub(super) fn head_rings(
     display: &eyekey_core::physics::display::DisplayGeometry,
     l: &[f32],
     target: &eyekey_core::physics::profile::VisionProfile,

@@ -2,6 +2,7 @@
 //! pipeline that turns a job into a frame bundle.
 
 pub mod job;
+pub mod leak;
 pub mod objectives;
 pub mod options;
 pub mod pipeline;

@@ -14,6 +14,7 @@ use std::sync::Mutex;
 
 use rayon::prelude::*;
 
+use crate::encoding::leak::LeakPatterns;
 use crate::encoding::solver::Objective;
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::Observer;
@@ -23,8 +24,50 @@ pub struct Term<'a> {
     pub observer: &'a Observer,
     /// What they should see, `[r·3 + a]` LMS.
     pub objective: Vec<f32>,
-    /// Weight w_k.
+    /// Weight w_k (0 drops the least-squares part).
     pub weight: f64,
+    /// The leak penalty ([`crate::encoding::leak`]) and its weight: `ω Σ_q Σ_a (q·(A_k L)_a)²`, normalised
+    /// like the data terms.
+    pub leak: Option<(&'a LeakPatterns, f64)>,
+}
+
+impl Term<'_> {
+    /// The term's value at view `view` (unnormalised) and, in place, `view` turned into the gradient image
+    /// ∂/∂view of it.
+    fn value_and_gradient_image(&self, view: &mut [f32]) -> f64 {
+        let leak = self.leak.map(|(p, w)| (p, w, p.project(view)));
+        let mut f = 0.0;
+        if self.weight > 0.0 {
+            let w = self.weight;
+            f += w * view
+                .par_iter_mut()
+                .zip(self.objective.par_iter())
+                .map(|(a, b)| {
+                    *a -= b;
+                    let r = *a as f64;
+                    *a *= (2.0 * w) as f32;
+                    r * r
+                })
+                .sum::<f64>();
+        } else {
+            view.iter_mut().for_each(|v| *v = 0.0);
+        }
+        if let Some((p, w, c)) = leak {
+            f += w * c.iter().map(|c| c * c).sum::<f64>();
+            p.accumulate(&c, 2.0 * w, view);
+        }
+        f
+    }
+
+    /// The term's Hessian applied to a view: `view` becomes 2w·view + 2ω Σ (q·view) q.
+    fn curvature_image(&self, view: &mut [f32]) {
+        let leak = self.leak.map(|(p, w)| (p, w, p.project(view)));
+        let w = (2.0 * self.weight) as f32;
+        view.par_iter_mut().for_each(|v| *v *= w);
+        if let Some((p, w, c)) = leak {
+            p.accumulate(&c, 2.0 * w, view);
+        }
+    }
 }
 
 fn sq_norm(v: &[f32]) -> f64 {
@@ -75,13 +118,8 @@ impl<'a> MultiplexObjective<'a> {
         self.terms
             .iter()
             .map(|t| {
-                let view = t.observer.view(l);
-                let r: f64 = view
-                    .par_iter()
-                    .zip(t.objective.par_iter())
-                    .map(|(a, b)| ((a - b) as f64).powi(2))
-                    .sum();
-                t.weight * r * self.scale
+                let mut view = t.observer.view(l);
+                t.value_and_gradient_image(&mut view) * self.scale
             })
             .collect()
     }
@@ -105,12 +143,9 @@ impl Objective for MultiplexObjective<'_> {
             let o = t.observer;
             let img = &mut image[..o.n_pixels() * 3];
             o.forward_lms(l, img);
-            img.par_iter_mut()
-                .zip(t.objective.par_iter())
-                .for_each(|(a, b)| *a -= b);
-            f += t.weight * self.scale * sq_norm(img);
+            f += self.scale * t.value_and_gradient_image(img);
             o.adjoint_lms(img, field);
-            let c = (2.0 * t.weight * self.scale) as f32;
+            let c = self.scale as f32;
             grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g += c * v);
         }
         f
@@ -127,8 +162,9 @@ impl Objective for MultiplexObjective<'_> {
             let o = t.observer;
             let img = &mut image[..o.n_pixels() * 3];
             o.forward_lms(v, img);
+            t.curvature_image(img);
             o.adjoint_lms(img, field);
-            let c = (2.0 * t.weight * self.scale) as f32;
+            let c = self.scale as f32;
             out.par_iter_mut().zip(field.par_iter()).for_each(|(o, x)| *o += c * x);
         }
     }
@@ -386,6 +422,17 @@ mod tests {
         let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
         let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
         let energy = obj_t.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
+        // A document on the retinal grid for the leak directions: a dark bar in a white field.
+        let g = t.grid();
+        let doc = image::RgbImage::from_fn(g.width, g.height, |x, y| {
+            if (2..5).contains(&x) && y > 1 {
+                image::Rgb([20, 20, 20])
+            } else {
+                image::Rgb([255, 255, 255])
+            }
+        });
+        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        assert!(!leak.is_empty());
         let mk = || {
             MultiplexObjective::new(
                 vec![
@@ -393,11 +440,20 @@ mod tests {
                         observer: &t,
                         objective: obj_t.clone(),
                         weight: 1.0,
+                        leak: None,
                     },
                     Term {
                         observer: &r,
                         objective: vec![0.2; r.n_pixels() * 3],
                         weight: 0.5,
+                        leak: Some((&leak, 0.7)),
+                    },
+                    // A leak-only decoy: no least-squares part at all.
+                    Term {
+                        observer: &r,
+                        objective: vec![],
+                        weight: 0.0,
+                        leak: Some((&leak, 2.0)),
                     },
                 ],
                 d.n_bands(),
@@ -406,6 +462,18 @@ mod tests {
             )
         };
         fd_check(&mk(), &x);
+        // The multiplex objective is quadratic: its curvature product is the gradient's exact difference.
+        let m = mk();
+        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
+        let (mut g0, mut g1, mut hv) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        m.value_and_gradient(&x, &mut g0);
+        let xv: Vec<f32> = x.iter().zip(&v).map(|(a, b)| a + b).collect();
+        m.value_and_gradient(&xv, &mut g1);
+        m.curvature_product(&v, &mut hv);
+        let diff: Vec<f32> = g1.iter().zip(&g0).map(|(a, b)| a - b).collect();
+        let err: f64 = diff.iter().zip(&hv).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt();
+        let scale = diff.iter().map(|a| (*a as f64).powi(2)).sum::<f64>().sqrt();
+        assert!(err <= 1e-3 * scale, "curvature {err} vs {scale}");
         let dm = DiffMaxObjective::new(mk(), &t, 0.05, 0.02);
         fd_check(&dm, &x);
         let tied = TiedViews::new(&dm, &d);
@@ -432,11 +500,13 @@ mod tests {
                     observer: &t,
                     objective: pat_a.clone(),
                     weight: 1.0,
+                    leak: None,
                 },
                 Term {
                     observer: &r,
                     objective: pat_b.clone(),
                     weight: 1.0,
+                    leak: None,
                 },
             ],
             d.n_bands(),

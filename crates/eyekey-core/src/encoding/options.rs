@@ -68,6 +68,11 @@ pub struct EncodeOptions {
     pub decoy: DecoyKind,
     /// Weight of each decoy observer's term relative to the target's (1.0).
     pub decoy_weight: f64,
+    /// Weight of the leak penalty on every decoy (docs/design.md §3, "Leak penalty"): the squared projections of
+    /// the decoy's view onto the document's ink-box pattern (plain and blurred) and, with `document_text`, onto
+    /// each secret character's glyph discriminant at ±1 px, relative to the target's term (0 = off). With
+    /// `decoy_weight` 0 the decoys are asked only not to see the document, not to see noise.
+    pub leak_weight: f64,
     /// Seed for population sampling, jitter and noise decoys.
     pub seed: u64,
     /// Sub-rays traced per light-field sample (S).
@@ -86,6 +91,8 @@ pub struct EncodeOptions {
     /// positions this far off axis (mm; 0 = only the design position). Stacked observers, as in the
     /// 2014 eyeglasses-free display.
     pub head_radius_mm: f64,
+    /// Eye positions on the head-movement ring, evenly spaced from the right (4 = right, left, up, down).
+    pub head_positions: u32,
     /// Adaptive decoy rounds: after each solve, sample `adaptive_candidates` fresh people and add up to
     /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
     pub adaptive_rounds: u32,
@@ -112,6 +119,7 @@ impl Default for EncodeOptions {
             population_decoys: 6,
             decoy: DecoyKind::Noise,
             decoy_weight: 1.0,
+            leak_weight: 0.0,
             seed: 1,
             sub_rays: 16,
             max_iterations: 300,
@@ -120,6 +128,7 @@ impl Default for EncodeOptions {
             lambda_c: 0.05,
             evaluation_population: 20,
             head_radius_mm: 0.0,
+            head_positions: 4,
             adaptive_rounds: 0,
             adaptive_candidates: 24,
             adaptive_per_round: 4,
@@ -157,7 +166,11 @@ impl EncodeOptions {
                 format!("must be within 0..=100, got {}", self.decoy_weight),
             );
         }
-        for (name, v) in [("lambda_w", self.lambda_w), ("lambda_c", self.lambda_c)] {
+        for (name, v) in [
+            ("lambda_w", self.lambda_w),
+            ("lambda_c", self.lambda_c),
+            ("leak_weight", self.leak_weight),
+        ] {
             if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
                 return bad(name, format!("must be within 0..=100, got {v}"));
             }
@@ -166,6 +179,12 @@ impl EncodeOptions {
             return bad(
                 "head_radius_mm",
                 format!("must be within 0..=20 mm, got {}", self.head_radius_mm),
+            );
+        }
+        if !(3..=16).contains(&self.head_positions) {
+            return bad(
+                "head_positions",
+                format!("must be within 3..=16, got {}", self.head_positions),
             );
         }
         if self.adaptive_rounds > 5 || self.adaptive_candidates > 200 || self.adaptive_per_round > 16 {

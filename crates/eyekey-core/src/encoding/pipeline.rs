@@ -9,9 +9,10 @@ pub use super::options::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use super::leak::LeakPatterns;
 use super::objectives::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
 use super::solver::{minimise, Objective, Progress, SolveResult, SolverOptions, Termination};
-use crate::evaluation::attackers::{camera_lens, head_ring, one_band_observers};
+use crate::evaluation::attackers::{camera_lens, one_band_observers, ring};
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
@@ -38,7 +39,7 @@ pub fn encode(
 ) -> Result<Encoded, PipelineError> {
     let document_text = validate_spec(spec)?;
     let o = &spec.options;
-    let mut cast = Cast::build(spec, cache, progress, cancel)?;
+    let mut cast = Cast::build(spec, document_text.as_ref(), cache, progress, cancel)?;
     let tied = o.ablation == Some(Ablation::Spectral);
     let mut x = warm_start(&spec.display, &spec.document, tied);
     let rounds = if o.method == Method::Diffmax {
@@ -177,11 +178,14 @@ struct Cast {
     moved: Vec<Observer>,
     others: Vec<Observer>,
     decoy_objectives: Vec<Vec<f32>>,
+    /// What no decoy may see (the leak penalty's directions), when `leak_weight` > 0.
+    leak: Option<LeakPatterns>,
 }
 
 impl Cast {
     fn build(
         spec: &JobSpec,
+        text: Option<&crate::evaluation::DocumentText>,
         cache: &TransportCache,
         progress: &(dyn Fn(f64) + Sync),
         cancel: &AtomicBool,
@@ -197,7 +201,19 @@ impl Cast {
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
+        let leak = if o.leak_weight > 0.0 {
+            let g = target.grid();
+            let (w, h) = spec.document.dimensions();
+            let attacker = text
+                .map(|t| crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height))
+                .transpose()
+                .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
+            Some(LeakPatterns::new(&spec.document, g.width, g.height, attacker.as_ref()))
+        } else {
+            None
+        };
         let mut cast = Self {
+            leak,
             moved: head_box_observers(spec, cache)?,
             others: Vec::new(),
             decoy_objectives: Vec::new(),
@@ -313,14 +329,14 @@ fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
     }
 }
 
-/// The target at four eye positions on a ring of radius `head_radius_mm` (none when it is 0); each is asked
-/// for the document with a quarter of the central weight.
+/// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
+/// is asked for the document with a quarter of the central weight.
 fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let r = spec.options.head_radius_mm;
     if r <= 0.0 {
         return Ok(Vec::new());
     }
-    head_ring(r)
+    ring(r, spec.options.head_positions)
         .into_iter()
         .map(|eye| {
             let o = &spec.options;
@@ -401,12 +417,14 @@ fn solve_round(
         observer: &cast.target,
         objective: cast.target_objective.clone(),
         weight: 1.0,
+        leak: None,
     }];
     for m in &cast.moved {
         terms.push(Term {
             observer: m,
             objective: cast.target_objective.clone(),
             weight: 0.25,
+            leak: None,
         });
     }
     for (observer, objective) in cast.others.iter().zip(&cast.decoy_objectives) {
@@ -414,6 +432,7 @@ fn solve_round(
             observer,
             objective: objective.clone(),
             weight: o.decoy_weight,
+            leak: cast.leak.as_ref().map(|p| (p, o.leak_weight)),
         });
     }
     let data = MultiplexObjective::new(terms, d.n_bands(), cast.energy, 1e-4);

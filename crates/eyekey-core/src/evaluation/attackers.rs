@@ -73,3 +73,21 @@ pub(crate) fn camera_channels(rgb: &[[f64; 3]], n_bands: usize) -> Vec<(String, 
 pub fn head_ring(r_mm: f64) -> [EyePosition; 4] {
     [(r_mm, 0.0), (-r_mm, 0.0), (0.0, r_mm), (0.0, -r_mm)].map(|(x_mm, y_mm)| EyePosition { x_mm, y_mm, dz_mm: 0.0 })
 }
+
+/// `n` eye positions evenly spaced on a ring of radius `r_mm`, the first to the right; for `n` = 4 the
+/// positions of [`head_ring`].
+pub fn ring(r_mm: f64, n: u32) -> Vec<EyePosition> {
+    if n == 4 {
+        return head_ring(r_mm).to_vec();
+    }
+    (0..n)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            EyePosition {
+                x_mm: r_mm * a.cos(),
+                y_mm: r_mm * a.sin(),
+                dz_mm: 0.0,
+            }
+        })
+        .collect()
+}

@@ -268,6 +268,29 @@ impl KnownFontAttacker {
         self.cells.len()
     }
 
+    /// What tells each secret cell's true glyph from the others: per cell, its box on the grid (x0, y0, width,
+    /// height) and the true glyph's template minus the mean of the other candidates' (row-major in the box). A
+    /// view whose cells are orthogonal to these, after the attacker's mean removal, gives the true glyph no edge.
+    pub fn discriminants(&self) -> Vec<((usize, usize, usize, usize), Vec<f32>)> {
+        self.cells
+            .iter()
+            .map(|c| {
+                let truth = self.alphabet.iter().position(|&a| a == c.truth).expect("the truth is a candidate");
+                let others = (c.templates.len() - 1) as f32;
+                let d = (0..c.w * c.h)
+                    .map(|i| {
+                        let rest: f32 = (0..c.templates.len())
+                            .filter(|&k| k != truth)
+                            .map(|k| c.templates[k][i])
+                            .sum();
+                        c.templates[truth][i] - rest / others
+                    })
+                    .collect();
+                ((c.x0, c.y0, c.w, c.h), d)
+            })
+            .collect()
+    }
+
     /// Probability of reading every secret character right by guessing.
     pub fn chance(&self) -> f64 {
         (self.alphabet.len() as f64).powi(-(self.cells.len() as i32))
