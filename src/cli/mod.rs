@@ -127,6 +127,9 @@ pub enum ExperimentCommand {
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
+        /// Only the encodings whose label contains this text.
+        #[arg(long)]
+        only: Option<String>,
     },
     /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
     /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
@@ -156,6 +159,21 @@ pub enum ExperimentCommand {
         /// Only the variants whose label contains this text.
         #[arg(long)]
         only: Option<String>,
+    },
+    /// Every preset's default encode on held-out targets and PIN slips: does the target read, and who else?
+    Defaults {
+        /// Output directory.
+        #[arg(long, default_value = "docs/experiments/defaults")]
+        out: PathBuf,
+        /// Held-out targets per preset.
+        #[arg(long, default_value_t = 3)]
+        targets: u32,
+        /// Held-out people at the target's position per encoding.
+        #[arg(long, default_value_t = 30)]
+        population: u32,
+        /// Only these presets (repeatable; default all).
+        #[arg(long)]
+        preset: Vec<String>,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -202,7 +220,7 @@ pub struct BenchArgs {
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
     pub sub_rays: u32,
-    /// Which benchmark: transport, wave, solver, encode or all.
+    /// Which benchmark: transport, wave, solver, encode, job (the `secure` default job end to end) or all.
     #[arg(long, default_value = "all")]
     pub section: String,
     /// Markdown file whose `<!-- bench:… -->` sections are replaced with the new figures.
@@ -237,6 +255,12 @@ pub struct EncodeArgs {
     /// Weight of each decoy observer relative to the target.
     #[arg(long)]
     pub decoy_weight: Option<f64>,
+    /// Weight of the leak penalty on every decoy (0 = off; docs/design.md §3.1).
+    #[arg(long)]
+    pub leak_weight: Option<f64>,
+    /// Keep the decoys' weights even when the target then cannot read its own view.
+    #[arg(long)]
+    pub no_target_guard: bool,
     /// Seed for sampling and jitter.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -329,7 +353,7 @@ pub struct EvaluateArgs {
 pub enum ExampleCommand {
     /// A display description.
     Display {
-        /// Preset: paper, secure, small, lenslet or pinhole.
+        /// Preset: paper, secure, small, lenslet, pinhole or dense.
         #[arg(long, default_value = "paper")]
         preset: String,
     },
@@ -513,8 +537,12 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             people,
             max_iterations,
+            only,
         }) => {
-            print!("{}", crate::research::bystanders::run(&out, people, max_iterations)?);
+            print!(
+                "{}",
+                crate::research::bystanders::run(&out, people, max_iterations, only.as_deref())?
+            );
         }
         Command::Experiment(ExperimentCommand::Headbox {
             out,
@@ -535,6 +563,17 @@ pub fn run(cli: Cli) -> Result<()> {
             print!(
                 "{}",
                 crate::research::encoders::run(&out, population, max_iterations, only.as_deref())?
+            );
+        }
+        Command::Experiment(ExperimentCommand::Defaults {
+            out,
+            targets,
+            population,
+            preset,
+        }) => {
+            print!(
+                "{}",
+                crate::research::defaults::run(&out, targets, population, &preset)?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
@@ -682,6 +721,8 @@ fn encode(a: &EncodeArgs) -> Result<()> {
             (None, None) => d.decoy,
         },
         decoy_weight: a.decoy_weight.unwrap_or(d.decoy_weight),
+        leak_weight: a.leak_weight.unwrap_or(d.leak_weight),
+        ensure_target_reads: !a.no_target_guard,
         seed: a.seed.unwrap_or(d.seed),
         sub_rays: a.sub_rays.unwrap_or(d.sub_rays),
         max_iterations: a.max_iterations.unwrap_or(d.max_iterations),

@@ -331,7 +331,7 @@ fn wave_figures(name: &str, sub_rays: u32) -> Result<WaveFigures> {
 }
 
 /// The `wave` section: the wave-optics operator (per-view stencils, docs/design.md §2.7) on the paper,
-/// lenslet, pinhole and secure presets, against the geometric CSR kernels of the same display and against the
+/// lenslet, pinhole and dense presets, against the geometric CSR kernels of the same display and against the
 /// multiply-add roofline, all measured in the same run.
 pub fn wave_bench(sub_rays: u32) -> Result<String> {
     let peak = eyekey_core::physics::transport::multiply_add_peak_gflops(20_000_000);
@@ -361,7 +361,7 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
         "geometric CSR A·L / Aᵀ·y",
         "chosen / geometric time (forward / adjoint)",
     ]));
-    for name in ["paper", "lenslet", "pinhole", "secure"] {
+    for name in ["paper", "lenslet", "pinhole", "dense"] {
         let f = wave_figures(name, sub_rays)?;
         let d = &f.display;
         let flops = 2.0 * f.mads as f64;
@@ -614,7 +614,7 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
 }
 
 /// The benchmark sections `eyekey bench --section` accepts besides `all`, in the order they run.
-const SECTIONS: [&str; 4] = ["transport", "wave", "solver", "encode"];
+const SECTIONS: [&str; 5] = ["transport", "wave", "solver", "encode", "job"];
 
 /// What every section of one `eyekey bench` run shares.
 struct BenchRun<'a> {
@@ -632,7 +632,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let all = args.section == "all";
     if !all && !SECTIONS.contains(&args.section.as_str()) {
         bail!(
-            "--section must be transport, wave, solver, encode or all, got {:?}",
+            "--section must be transport, wave, solver, encode, job or all, got {:?}",
             args.section
         );
     }
@@ -651,7 +651,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 "transport" => run.transport()?,
                 "wave" => run.wave()?,
                 "solver" => run.solver()?,
-                _ => run.encode()?,
+                "encode" => run.encode()?,
+                _ => run.job()?,
             };
             print!("{body}");
             write_section(&args.out, name, &body)?;
@@ -732,9 +733,112 @@ impl BenchRun<'_> {
             options: EncodeOptions {
                 population_decoys: 0,
                 sub_rays: self.args.sub_rays,
+                // The paper's two-observer multiplexing (Eq. 14), as the target was set for.
+                decoy_weight: 1.0,
+                leak_weight: 0.0,
+                ensure_target_reads: false,
                 ..Default::default()
             },
         }
+    }
+
+    /// The `job` section: the `secure` preset's job with every default option (a sampled target, a PIN slip
+    /// with its text hint), end to end from a cold start as a worker runs it (`run_job`: operators, solve, the
+    /// default evaluation, bundle), with where the time goes; then a 1,000-person evaluation of its frames, cold
+    /// and with the people's operators cached.
+    fn job(&self) -> Result<String> {
+        let display = DisplayGeometry::secure();
+        let g = (display.holes_x * 4, display.holes_y * 4);
+        let text = eyekey_core::evaluation::DocumentText {
+            lines: vec!["PIN".into(), "4821".into()],
+            scale: (g.0 / 28).max(1),
+            alphabet: "0123456789".into(),
+        };
+        let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+        let spec = JobSpec {
+            display: display.clone(),
+            target: eyekey_core::physics::population::sample_population(1, 4242, Default::default()).remove(0),
+            target_label: "bench".into(),
+            observers: vec![],
+            document: eyekey_core::imaging::glyphs::render_text(&lines, g.0, g.1, text.scale),
+            decoy: None,
+            options: EncodeOptions {
+                document_text: Some(text.clone()),
+                ..Default::default()
+            },
+        };
+        let cache = TransportCache::default();
+        let dir = tempfile::tempdir()?;
+        let cancel = AtomicBool::new(false);
+        // What `run_job` does, in its two steps. The encode's progress marks its stages: 0.15 once the target's
+        // and the decoys' operators are built.
+        let marks = std::sync::Mutex::new(Vec::<(f64, f64)>::new());
+        let t = Instant::now();
+        let encoded = pipeline::encode(
+            &spec,
+            &cache,
+            &|p| marks.lock().unwrap_or_else(|e| e.into_inner()).push((p, t.elapsed().as_secs_f64())),
+            &cancel,
+        )?;
+        let t_solved = t.elapsed().as_secs_f64();
+        let out = pipeline::write_outputs(&spec, &encoded, &dir.path().join("job"), true, &cache, &|_| {}, &cancel)?;
+        let total = t.elapsed().as_secs_f64();
+        let marks = marks.into_inner().unwrap_or_else(|e| e.into_inner());
+        let t_cast = marks.iter().find(|m| m.0 >= 0.15 - 1e-9).map(|m| m.1).unwrap_or(t_solved);
+        let target_reads = out.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false);
+        let evaluate_1000 = |label: &str| -> Result<String> {
+            let t = Instant::now();
+            let ev = eyekey_core::evaluation::evaluate(
+                &display,
+                &encoded.light_field,
+                &spec.document,
+                pipeline::OBJECTIVE_LEVEL,
+                &spec.target,
+                &[],
+                &eyekey_core::evaluation::EvaluationOptions {
+                    population: 1000,
+                    document_text: Some(text.clone()),
+                    key_directions: 0,
+                    head_offsets_mm: vec![],
+                    camera_focus_d: vec![],
+                    ..Default::default()
+                },
+                &cache,
+                &|_| {},
+                &cancel,
+            )?;
+            let p = ev.report.population.expect("a population was asked for");
+            Ok(format!(
+                "| 1,000-person evaluation, {label} | {:.1} s ({} of 1000 read) |
+",
+                t.elapsed().as_secs_f64(),
+                p.readable_count
+            ))
+        };
+        let cold = evaluate_1000("people's operators built")?;
+        let warm = evaluate_1000("people's operators cached")?;
+        Ok(format!(
+            "Measured {} by `eyekey bench --section job` (release build, transport cache empty at the start): the \
+             `secure` preset, every default option ({} decoys at weight {}, leak weight {}, {} iterations at most, \
+             {} sub-rays; evaluation: {} people, camera, key sensitivity, head movement).\n\n{}\
+             | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}) |\n\
+             | of which: target's and decoys' operators | {t_cast:.1} s |\n\
+             | of which: solve | {:.1} s ({} iterations, {}) |\n\
+             | of which: evaluation and bundle | {:.1} s |\n{cold}{warm}| peak resident memory | {:.0} MB |\n",
+            self.stamp,
+            spec.options.population_decoys,
+            spec.options.decoy_weight,
+            spec.options.leak_weight,
+            spec.options.max_iterations,
+            spec.options.sub_rays,
+            spec.options.evaluation_population,
+            table_header(&["quantity", "value"]),
+            t_solved - t_cast,
+            encoded.solver.iterations,
+            encoded.solver.termination,
+            total - t_solved,
+            peak_memory_bytes() as f64 / 1e6
+        ))
     }
 
     /// The `encode` section: a whole cold-start encode (transport, solve, bundle written to a temporary

@@ -25,6 +25,10 @@ struct Encoding {
     decoy_weight: f64,
     /// The target stacked on a ring of this radius (mm; 0 = only the design position).
     head_radius_mm: f64,
+    /// The decoys' leak penalty weight (0 = off).
+    leak_weight: f64,
+    /// Camera decoys at −1, 0 and +1 D with an 8 mm aperture.
+    cameras: bool,
 }
 
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
@@ -50,10 +54,14 @@ impl Baseline {
         })
     }
 
-    /// The experiments' encode options: 12 sub-rays, seed 5, wave optics, no decoys yet.
+    /// The experiments' encode options: 12 sub-rays, seed 5, wave optics, no decoys, no leak penalty and no
+    /// target guard yet (each experiment says what it adds, whatever the defaults).
     pub(super) fn options(max_iterations: u32) -> EncodeOptions {
         EncodeOptions {
             population_decoys: 0,
+            decoy_weight: 0.0,
+            leak_weight: 0.0,
+            ensure_target_reads: false,
             max_iterations,
             sub_rays: 12,
             seed: 5,
@@ -71,6 +79,10 @@ impl Baseline {
                 population_decoys: e.decoys,
                 decoy_weight: e.decoy_weight,
                 head_radius_mm: e.head_radius_mm,
+                leak_weight: e.leak_weight,
+                camera_decoys: e.cameras,
+                camera_decoy_focus_d: vec![-1.0, 0.0, 1.0],
+                camera_decoy_aperture_mm: 8.0,
                 ..Self::options(max_iterations)
             },
         )
@@ -170,7 +182,7 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
 
 /// Runs the bystander experiment with `people` sampled people per position; writes `out/bystanders.md`,
 /// `out/bystanders.json` and each encoding's pictures; returns the Markdown.
-pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
+pub fn run(out: &Path, people: u32, max_iterations: u32, only: Option<&str>) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let base = Baseline::new()?;
     let encodings = [
@@ -179,23 +191,64 @@ pub fn run(out: &Path, people: u32, max_iterations: u32) -> Result<String> {
             decoys: 0,
             decoy_weight: 0.0,
             head_radius_mm: 0.0,
+            leak_weight: 0.0,
+            cameras: false,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
             decoys: 6,
             decoy_weight: 0.3,
             head_radius_mm: 0.0,
+            leak_weight: 0.0,
+            cameras: false,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, the target stacked on a 5 mm ring",
             decoys: 6,
             decoy_weight: 0.3,
             head_radius_mm: 5.0,
+            leak_weight: 0.0,
+            cameras: false,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 1",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.0,
+            leak_weight: 1.0,
+            cameras: false,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 1, the target stacked on a 5 mm ring",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 5.0,
+            leak_weight: 1.0,
+            cameras: false,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 3",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.0,
+            leak_weight: 3.0,
+            cameras: false,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 1, camera decoys at −1, 0, +1 D (8 mm)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.0,
+            leak_weight: 1.0,
+            cameras: true,
         },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
     for (k, e) in encodings.iter().enumerate() {
+        if only.is_some_and(|f| !e.label.contains(f)) {
+            continue;
+        }
         let (l, t_encode) = base.encode(e, max_iterations)?;
         let options = EvaluationOptions {
             population: 0,
@@ -343,23 +396,38 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
         "their evaluation",
         "target at 0 / 1 / 2 / 3 / 4 / 5 mm: worst legibility (ring positions read by the known-font attacker, of 4)",
     ]);
-    for (label, head_radius_mm, method) in [
+    for (label, head_radius_mm, method, leak_weight) in [
         (
             "encoded for the design position, shown fixed",
             0.0,
             HeadBoxMethod::Fixed,
+            0.0,
         ),
         (
             "the same frames re-indexed for the tracked eye",
             0.0,
             HeadBoxMethod::Tracked,
+            0.0,
         ),
-        ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed),
-        ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed),
+        ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed, 0.0),
+        ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed, 0.0),
         (
             "target stacked on a 5 mm ring, re-indexed for the tracked eye",
             5.0,
             HeadBoxMethod::Tracked,
+            0.0,
+        ),
+        (
+            "with the leak penalty (weight 3, the default), shown fixed",
+            0.0,
+            HeadBoxMethod::Fixed,
+            3.0,
+        ),
+        (
+            "with the leak penalty (weight 3), re-indexed for the tracked eye",
+            0.0,
+            HeadBoxMethod::Tracked,
+            3.0,
         ),
     ] {
         let encoding = Encoding {
@@ -367,6 +435,8 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
             decoys: 6,
             decoy_weight: 0.3,
             head_radius_mm,
+            leak_weight,
+            cameras: false,
         };
         let (l, t_encode) = base.encode(&encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(

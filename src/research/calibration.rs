@@ -320,6 +320,8 @@ impl<'a> Views<'a> {
                 sub_rays: self.setup.sub_rays,
                 max_iterations: self.setup.max_iterations,
                 evaluation_population: 0,
+                leak_weight: 0.0,
+                ensure_target_reads: false,
                 ..Default::default()
             },
         };

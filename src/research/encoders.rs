@@ -75,6 +75,48 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
             ..base.clone()
         },
     ));
+    out.push(v(
+        "6 noise decoys, weight 0.3, + leak weight 1 + camera decoys (±0.5 D, 6 mm)",
+        EncodeOptions {
+            leak_weight: 1.0,
+            camera_decoys: true,
+            ..base.clone()
+        },
+    ));
+    out.push(v(
+        "6 noise decoys, weight 0.3, + leak weight 1 + camera decoys (−1, 0, +1 D, 8 mm)",
+        EncodeOptions {
+            leak_weight: 1.0,
+            camera_decoys: true,
+            camera_decoy_focus_d: vec![-1.0, 0.0, 1.0],
+            camera_decoy_aperture_mm: 8.0,
+            ..base.clone()
+        },
+    ));
+    out.push(v(
+        "6 noise decoys, weight 0.3, + leak weight 1 + 2 adaptive rounds",
+        EncodeOptions {
+            leak_weight: 1.0,
+            adaptive_rounds: 2,
+            ..base.clone()
+        },
+    ));
+    out.push(v(
+        "12 noise decoys, weight 0.2, + leak weight 1",
+        EncodeOptions {
+            population_decoys: 12,
+            decoy_weight: 0.2,
+            leak_weight: 1.0,
+            ..base.clone()
+        },
+    ));
+    out.push(v(
+        "6 noise decoys, weight 0.3, + leak weight 3",
+        EncodeOptions {
+            leak_weight: 3.0,
+            ..base.clone()
+        },
+    ));
     for (r, n) in [(3.0, 4), (4.0, 4), (5.0, 4), (6.0, 4), (6.4, 4), (5.0, 8)] {
         out.push(v(
             &format!("6 noise decoys, target stacked on a {r} mm ring ({n} positions)"),

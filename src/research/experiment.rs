@@ -238,6 +238,10 @@ impl PaperSetup {
             max_iterations,
             sub_rays: 16,
             optics: self.optics,
+            // The paper's Eq. 14: every observer at the target's weight, nothing else.
+            decoy_weight: 1.0,
+            leak_weight: 0.0,
+            ensure_target_reads: false,
             ..Default::default()
         });
         let t = Instant::now();
@@ -262,6 +266,9 @@ impl PaperSetup {
             max_iterations,
             decoy: DecoyKind::Image,
             optics: self.optics,
+            decoy_weight: 1.0,
+            leak_weight: 0.0,
+            ensure_target_reads: false,
             ..Default::default()
         });
         let cancel = AtomicBool::new(false);
@@ -722,6 +729,8 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
             adaptive_candidates: 32,
             adaptive_per_round: 6,
             optics: c.optics,
+            leak_weight: 0.0,
+            ensure_target_reads: false,
             ..Default::default()
         },
     }
@@ -823,7 +832,8 @@ fn pareto_frontier(points: &[SweepPoint]) -> Vec<&SweepPoint> {
 }
 
 /// The sweep's Markdown: the table of all points, the Pareto frontier and, under geometric optics, the point
-/// chosen for `secure`; under wave optics, the point with the fewest readers among those the target reads.
+/// the `dense` preset was chosen as; under wave optics, the point with the fewest readers among those the target
+/// reads.
 fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
     let mut md = format!(
         "Forward model of the encoders and of every viewer: {optics:?} optics. Resolvability M is the smallest \
@@ -885,8 +895,8 @@ fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
         }
         return Ok(md);
     }
-    // The `secure` preset is chosen from the frontier: the fewest readers among points where the target reads
-    // with legibility ≥ 0.85.
+    // Under geometric optics the `dense` preset was chosen from the frontier: the fewest readers among points
+    // where the target reads with legibility ≥ 0.85.
     if let Some(best) = frontier
         .iter()
         .filter(|p| p.target_legibility >= 0.85)
@@ -894,7 +904,7 @@ fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
     {
         writeln!(
             md,
-            "\nChosen for the `secure` preset (fewest readers with target legibility ≥ 0.85): **{}** (target {:.2}, readable {:.1} %).",
+            "\nChosen for the `dense` preset (fewest readers with target legibility ≥ 0.85): **{}** (target {:.2}, readable {:.1} %).",
             best.label,
             best.target_legibility,
             100.0 * best.readable_fraction
@@ -904,7 +914,7 @@ fn sweep_markdown(points: &[SweepPoint], optics: Optics) -> Result<String> {
 }
 
 /// Maps the design space to (target legibility, fraction of a sampled population that can read).
-/// Under geometric optics the configurations are the ones the `secure` preset was chosen from; under wave
+/// Under geometric optics the configurations are the ones the `dense` preset was chosen from; under wave
 /// optics, displays that resolve their views (`wave_sweep_configs`).
 pub fn sweep(out: &Path, population: u32, max_iterations: u32, optics: Optics) -> Result<(String, Vec<SweepPoint>)> {
     create_out(out)?;
@@ -964,6 +974,9 @@ fn secure_evaluate(
         &EvaluationOptions {
             population,
             key_directions: 4,
+            document_text: enc.document_text.clone(),
+            camera_focus_d: eyekey_core::evaluation::BystanderOptions::default().camera_focus_d,
+            camera_apertures_mm: eyekey_core::evaluation::BystanderOptions::default().camera_apertures_mm,
             ..Default::default()
         },
         cache,
@@ -990,18 +1003,25 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
     )?;
     writeln!(
         md,
-        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, {} adaptive rounds of {} candidates (decoys added: {}), camera decoys: {} |",
+        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, leak weight {}, {} adaptive rounds, camera decoys: {}, decoy weights finally scaled by {} |",
         options.population_decoys,
         options.decoy_weight,
+        options.leak_weight,
         options.adaptive_rounds,
-        options.adaptive_candidates,
-        serde_json::json!(enc.solver.adaptive_decoys_added),
-        options.camera_decoys
+        options.camera_decoys,
+        enc.solver.decoy_weight_scale
     )?;
     writeln!(
         md,
-        "| target legibility / PSNR / SSIM | {:.2} / {:.1} dB / {:.2} |",
-        r.target.legibility, r.target.psnr_db, r.target.ssim
+        "| target legibility / PSNR / SSIM | {:.2} / {:.1} dB / {:.2}; the known-font attacker reads it: {} |",
+        r.target.legibility,
+        r.target.psnr_db,
+        r.target.ssim,
+        r.target
+            .known_font
+            .as_ref()
+            .map(|k| format!("{} (\"{}\")", if k.correct { "yes" } else { "**no**" }, k.text))
+            .unwrap_or_else(|| "–".into())
     )?;
     Ok(())
 }
@@ -1010,10 +1030,12 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
 fn secure_population_rows(md: &mut String, p: &PopulationSummary) -> Result<()> {
     writeln!(
         md,
-        "| sampled people who can read | {} of {} ({:.1} %) |",
+        "| sampled people who read (the known-font attacker) | {} of {} ({:.1} %, 95 % interval {:.1}–{:.1} %) |",
         p.readable_count,
         p.count,
-        100.0 * p.readable_fraction
+        100.0 * p.readable_fraction,
+        100.0 * p.readable_ci95.0,
+        100.0 * p.readable_ci95.1
     )?;
     writeln!(
         md,
@@ -1038,8 +1060,16 @@ fn secure_attacker_rows(md: &mut String, r: &Report) -> Result<()> {
     if let Some(c) = &r.camera {
         writeln!(
             md,
-            "| camera attacker's best | {:.2} ({}) |",
-            c.best.legibility, c.best.label
+            "| camera attacker's best | {:.2}{} ({}); settings that read: {} of {} |",
+            c.best.legibility,
+            c.best
+                .known_font
+                .as_ref()
+                .map(|k| format!(", known font \"{}\" ({}/{})", k.text, k.characters_right, k.characters))
+                .unwrap_or_default(),
+            c.best.label,
+            c.tried.iter().filter(|s| s.readable).count(),
+            c.tried.len()
         )?;
     }
     if let Some(k) = &r.key_sensitivity {
@@ -1088,7 +1118,11 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
         observers: vec![],
         document: pin_slip(g.0, g.1),
         decoy: None,
-        options: secure_encode_options(),
+        // The default options (the encoder frontier's, docs/experiments.md §2d) and the slip's text hint.
+        options: EncodeOptions {
+            document_text: Some(pin_slip_text(g.0)),
+            ..Default::default()
+        },
     };
     let (enc, t_encode) = secure_encode(&spec, out, &cache)?;
     let (ev, t_eval) = secure_evaluate(&spec, &enc, population, out, &cache)?;
@@ -1104,16 +1138,3 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     Ok(md)
 }
 
-/// The encoder options paired with the `secure` preset (chosen from the sweep's frontier).
-pub fn secure_encode_options() -> EncodeOptions {
-    EncodeOptions {
-        population_decoys: 12,
-        decoy_weight: 0.2,
-        max_iterations: 300,
-        adaptive_rounds: 2,
-        adaptive_candidates: 32,
-        adaptive_per_round: 6,
-        camera_decoys: true,
-        ..Default::default()
-    }
-}

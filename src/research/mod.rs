@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod bystanders;
 pub mod calibration;
+pub mod defaults;
 pub mod encoders;
 pub mod experiment;
 pub mod wave;

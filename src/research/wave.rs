@@ -117,6 +117,10 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str, fourier: bool) ->
         // Encoded as eyekey did before it modelled diffraction, to measure what that model promised.
         options: EncodeOptions {
             optics: Optics::Geometric,
+            population_decoys: 6,
+            decoy_weight: 1.0,
+            leak_weight: 0.0,
+            ensure_target_reads: false,
             ..Default::default()
         },
     };

@@ -131,10 +131,10 @@ fn resolving_lenslet_display() -> serde_json::Value {
 }
 
 #[tokio::test]
-async fn the_secure_preset_does_not_resolve_its_views_and_says_so() {
+async fn the_dense_preset_does_not_resolve_its_views_and_says_so() {
     let app = spawn_app().await;
     let r = app
-        .op_post("/v1/displays", &json!({ "name": "vault", "preset": "secure" }))
+        .op_post("/v1/displays", &json!({ "name": "vault", "preset": "dense" }))
         .await;
     let display = expect_json(r, StatusCode::CREATED).await["display"].clone();
     let bands = display["resolvability"]["bands"].as_array().unwrap();

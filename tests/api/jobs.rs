@@ -338,7 +338,7 @@ async fn a_job_for_a_display_that_does_not_resolve_its_views_is_accepted_with_a_
     let app = spawn_app().await;
     let mut f = app.fixtures().await;
     let r = app
-        .op_post("/v1/displays", &json!({ "name": "vault", "preset": "secure" }))
+        .op_post("/v1/displays", &json!({ "name": "vault", "preset": "dense" }))
         .await;
     let display = expect_json(r, StatusCode::CREATED).await["display"].clone();
     f.display_id = display["id"].as_str().unwrap().to_string();

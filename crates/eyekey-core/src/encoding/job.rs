@@ -66,6 +66,12 @@ pub struct SolverSummary {
     pub adaptive_decoys_added: Vec<usize>,
     /// Unknowns of the light field.
     pub unknowns: usize,
+    /// The factor the decoys' weights (noise and leak) were finally scaled by: 1 unless the target did not read
+    /// its own view and `ensure_target_reads` halved them and solved again.
+    pub decoy_weight_scale: f64,
+    /// Whether the target reads its own view of the final light field, by the evaluation's judge (the known-font
+    /// attacker with a text hint, the legibility threshold without).
+    pub target_reads: bool,
 }
 
 /// Why a job did not produce a bundle.

@@ -100,9 +100,19 @@ pub struct EncodeOptions {
     pub adaptive_candidates: u32,
     /// Decoys added per adaptive round at most.
     pub adaptive_per_round: u32,
-    /// Camera decoys: an ideal 6 mm lens focused at −0.5 D and +0.5 D behind a filter passing one projector band
-    /// (the evaluation's strongest attacker), each shown a noise mask.
+    /// Camera decoys: an ideal lens of `camera_decoy_aperture_mm` focused at each of `camera_decoy_focus_d`
+    /// behind a filter passing one projector band (the evaluation's strongest attacker), each shown a noise mask
+    /// (and held to the leak penalty).
     pub camera_decoys: bool,
+    /// Focus settings of the camera decoys, dioptres off the display (at most 9, each within ±5 D).
+    pub camera_decoy_focus_d: Vec<f64>,
+    /// Aperture of the camera decoys' lens, mm (2–10).
+    pub camera_decoy_aperture_mm: f64,
+    /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
+    /// decoy's weight and leak weight and solve again from the plain document, at most 3 times. The target's
+    /// reading comes first: a display that cannot hide the document from the decoys then shows it to the target
+    /// anyway, and the evaluation says who else reads.
+    pub ensure_target_reads: bool,
     /// The document's text, font scale and secret alphabet, when it is a PIN slip or form drawn in eyekey's
     /// font (`eyekey example document`): the job's evaluation then also reads every view with the known-font
     /// attacker. Write secret characters as `*` to describe the layout without the secret; their values are
@@ -118,8 +128,8 @@ impl Default for EncodeOptions {
             ablation: None,
             population_decoys: 6,
             decoy: DecoyKind::Noise,
-            decoy_weight: 1.0,
-            leak_weight: 0.0,
+            decoy_weight: 0.3,
+            leak_weight: 3.0,
             seed: 1,
             sub_rays: 16,
             max_iterations: 300,
@@ -133,6 +143,9 @@ impl Default for EncodeOptions {
             adaptive_candidates: 24,
             adaptive_per_round: 4,
             camera_decoys: false,
+            camera_decoy_focus_d: vec![-0.5, 0.5],
+            camera_decoy_aperture_mm: 6.0,
+            ensure_target_reads: true,
             document_text: None,
         }
     }
@@ -191,6 +204,18 @@ impl EncodeOptions {
             return bad(
                 "adaptive_rounds",
                 "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
+            );
+        }
+        if self.camera_decoy_focus_d.len() > 9 || self.camera_decoy_focus_d.iter().any(|f| !(f.is_finite() && f.abs() <= 5.0)) {
+            return bad(
+                "camera_decoy_focus_d",
+                "at most 9 focus settings, each within ±5 D".to_string(),
+            );
+        }
+        if !(self.camera_decoy_aperture_mm.is_finite() && (2.0..=10.0).contains(&self.camera_decoy_aperture_mm)) {
+            return bad(
+                "camera_decoy_aperture_mm",
+                format!("must be within 2..=10 mm, got {}", self.camera_decoy_aperture_mm),
             );
         }
         if let Some(t) = &self.document_text {

@@ -49,7 +49,16 @@ pub fn encode(
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
     let g = cast.target.grid();
-    let reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+    // The evaluation's judge: the known-font attacker where the text is known (adaptive rounds rank candidates
+    // by legibility alone).
+    let mut reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
+    if let Some(t) = &document_text {
+        let (w, h) = spec.document.dimensions();
+        reference = reference.with_known_font(
+            crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height)
+                .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?,
+        );
+    }
     let mut summary = SolverSummary {
         algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
         iterations: 0,
@@ -62,11 +71,13 @@ pub fn encode(
         observers: 0,
         adaptive_decoys_added: Vec::new(),
         unknowns: 0,
+        decoy_weight_scale: 1.0,
+        target_reads: false,
     };
     for round in 0..=rounds {
         let done_before = summary.iterations as f64;
         let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
-        let result = solve_round(spec, &cast, x, tied, report, cancel)?;
+        let result = solve_round(spec, &cast, x, tied, 1.0, report, cancel)?;
         summary.iterations += result.iterations;
         summary.restarts += result.restarts;
         summary.seconds += result.seconds;
@@ -84,7 +95,27 @@ pub fn encode(
             break;
         }
     }
-    let l = expand_tied(&spec.display, &x, tied);
+    let mut l = expand_tied(&spec.display, &x, tied);
+    summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
+    // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
+    let has_decoys = !cast.others.is_empty();
+    let mut scale = 1.0;
+    while o.ensure_target_reads && has_decoys && !summary.target_reads && scale > 0.2 {
+        scale *= 0.5;
+        let done_before = summary.iterations as f64;
+        let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
+        let start = warm_start(&spec.display, &spec.document, tied);
+        let result = solve_round(spec, &cast, start, tied, scale, report, cancel)?;
+        summary.iterations += result.iterations;
+        summary.restarts += result.restarts;
+        summary.seconds += result.seconds;
+        summary.objective_history.extend_from_slice(&result.history);
+        (summary.termination, summary.objective, summary.lipschitz) =
+            (result.termination, result.objective, result.lipschitz);
+        l = expand_tied(&spec.display, &result.x, tied);
+        summary.decoy_weight_scale = scale;
+        summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
+    }
     progress(0.85);
     summary.observers = cast.others.len() + 1 + cast.moved.len();
     summary.unknowns = l.len();
@@ -346,13 +377,14 @@ fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Obse
         .collect()
 }
 
-/// Camera decoys: an ideal 6 mm lens focused ±0.5 D off the display behind each one-band filter.
+/// Camera decoys: an ideal lens (`camera_decoy_aperture_mm`) at each `camera_decoy_focus_d` behind each one-band
+/// filter.
 fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let d = &spec.display;
+    let o = &spec.options;
     let mut out = Vec::new();
-    for focus in [-0.5, 0.5] {
-        let lens = camera_lens(focus, 6.0);
-        let o = &spec.options;
+    for &focus in &o.camera_decoy_focus_d {
+        let lens = camera_lens(focus, o.camera_decoy_aperture_mm);
         let transports = transports(
             d,
             Lens::Achromat(&lens),
@@ -409,6 +441,7 @@ fn solve_round(
     cast: &Cast,
     x: Vec<f32>,
     tied: bool,
+    decoy_scale: f64,
     mut report: impl FnMut(Progress),
     cancel: &AtomicBool,
 ) -> Result<SolveResult, PipelineError> {
@@ -431,8 +464,8 @@ fn solve_round(
         terms.push(Term {
             observer,
             objective: objective.clone(),
-            weight: o.decoy_weight,
-            leak: cast.leak.as_ref().map(|p| (p, o.leak_weight)),
+            weight: o.decoy_weight * decoy_scale,
+            leak: cast.leak.as_ref().map(|p| (p, o.leak_weight * decoy_scale)),
         });
     }
     let data = MultiplexObjective::new(terms, d.n_bands(), cast.energy, 1e-4);
@@ -682,5 +715,88 @@ mod tests {
         let read = report.target.known_font.expect("the target's view was read");
         assert_eq!((read.characters, read.chance), (4, 1e-4));
         assert!(report.population.unwrap().people.iter().all(|p| p.known_font.is_some()));
+    }
+
+    fn pin_hint() -> DocumentText {
+        DocumentText {
+            lines: vec!["PIN".into(), "4821".into()],
+            scale: 4,
+            alphabet: "0123456789".into(),
+        }
+    }
+
+    #[test]
+    fn the_leak_penalty_takes_the_document_out_of_the_decoys_views() {
+        // The same two decoys, with and without the penalty: what each decoy sees of the document's pattern
+        // (the penalty's own measure, computed from the decoys' views of the final light field) must fall.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let job = |leak_weight: f64| {
+            let mut spec = pin_job(pin_hint());
+            spec.options = EncodeOptions {
+                population_decoys: 2,
+                max_iterations: 60,
+                leak_weight,
+                ensure_target_reads: false,
+                ..spec.options
+            };
+            spec
+        };
+        let with = job(3.0);
+        let text = validate_spec(&with).unwrap();
+        let cast = Cast::build(&with, text.as_ref(), &cache, &|_| {}, &cancel).unwrap();
+        let patterns = cast.leak.as_ref().expect("leak weight > 0 builds the directions");
+        assert_eq!(patterns.len(), 3 + 4 * 9, "ink box at 3 blurs, 4 digits at 9 shifts");
+        let seen = |spec: &JobSpec| {
+            let l = encode(spec, &cache, &|_| {}, &cancel).unwrap().light_field;
+            cast.others.iter().map(|o| patterns.penalty(&o.view(&l))).sum::<f64>()
+        };
+        let (leaky, penalised) = (seen(&job(0.0)), seen(&with));
+        assert!(penalised < 0.5 * leaky, "with the penalty {penalised}, without {leaky}");
+    }
+
+    #[test]
+    fn lighter_decoys_are_tried_until_the_target_reads_its_own_view() {
+        // A decoy with the target's own eyes at 3 times the target's weight: the best the solve can do shows
+        // both (S + 3·N)/4, the document at a quarter of the view under a high-contrast mask of 2 px blocks, and
+        // the target cannot read it. Within 60 iterations it cannot at weights 3, 3/2 or 1 and can at 3/4 and
+        // below, so halving until the target reads must stop at 3/4, a scale of 1/4.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let job = |ensure_target_reads: bool| {
+            let mut spec = pin_job(pin_hint());
+            spec.observers = vec![spec.target.clone()];
+            spec.options = EncodeOptions {
+                population_decoys: 0,
+                decoy_weight: 3.0,
+                leak_weight: 0.0,
+                max_iterations: 60,
+                ensure_target_reads,
+                ..spec.options
+            };
+            spec
+        };
+        let bare = encode(&job(false), &cache, &|_| {}, &cancel).unwrap();
+        assert!(!bare.solver.target_reads, "heavy decoys hide the PIN from the target");
+        assert_eq!(bare.solver.decoy_weight_scale, 1.0);
+        let guarded = encode(&job(true), &cache, &|_| {}, &cancel).unwrap();
+        assert!(guarded.solver.target_reads, "{:?}", guarded.solver.decoy_weight_scale);
+        assert_eq!(guarded.solver.decoy_weight_scale, 0.25);
+        // The summary's reading is the evaluation's: the known-font attacker on the target's own view.
+        let spec = job(true);
+        let g = Observer::new(
+            &spec.display,
+            &spec.target,
+            EyePosition::default(),
+            &base_transport(&spec.options),
+            spec.options.optics,
+            &cache,
+        )
+        .unwrap();
+        let (w, h) = spec.document.dimensions();
+        let grid = g.grid();
+        let attacker = crate::evaluation::KnownFontAttacker::new(&pin_hint(), w, h, grid.width, grid.height).unwrap();
+        let view = crate::evaluation::luminance(&g.view(&guarded.light_field));
+        assert!(attacker.read(&view).correct);
     }
 }

@@ -45,7 +45,7 @@ pub enum DisplayError {
         reason: String,
     },
     /// An unknown preset name.
-    #[error("unknown display preset {0:?} (known: paper, secure, small, lenslet, pinhole)")]
+    #[error("unknown display preset {0:?} (known: paper, secure, small, lenslet, pinhole, dense)")]
     UnknownPreset(String),
 }
 
@@ -106,7 +106,7 @@ pub struct DisplayGeometry {
 }
 
 /// Names of the built-in presets.
-pub const PRESETS: &[&str] = &["paper", "secure", "small", "lenslet", "pinhole"];
+pub const PRESETS: &[&str] = &["paper", "secure", "small", "lenslet", "pinhole", "dense"];
 
 impl DisplayGeometry {
     /// The paper's synthesized setup (§7.3): 100×100 holes, 5×5 views, 4 narrow-band projectors.
@@ -133,11 +133,36 @@ impl DisplayGeometry {
         }
     }
 
-    /// A denser-in-angle display chosen for secrecy: 9×9 views across the pupil, 48×48 holes at 0.3 mm.
+    /// The display eyekey's secrecy is measured on (docs/experiments.md §2b–§2d): 32×32 square lenslets of
+    /// 1 mm (a 32 mm square, room for a PIN slip), 9×9 views, the screen at their focal plane 92.6 mm behind.
     ///
-    /// View spacing at the pupil is p_s·d/g = 0.75 mm, so 9 views span 6.75 mm and roughly 7×7 of them
-    /// cross a 6 mm pupil: more angular freedom per hole lets decoys and the target's image coexist.
+    /// Optically it is the `lenslet` preset on a smaller array: views p_s·d/f = (1/9 mm)·500/92.6 = 0.6 mm apart
+    /// at the pupil, resolvability 1.9–2.7 per band, and every lenslet's block of views repeats at the pupil
+    /// every p_h(1 + f/d)·d/f = 6.4 mm. Fewer lenslets keep the encode within seconds; its default options
+    /// ([`crate::encoding::pipeline::EncodeOptions::secure`]) are the encoder frontier's.
     pub fn secure() -> Self {
+        let p_s = 1.0 / 9.0;
+        Self {
+            aperture: Aperture::Lenslet,
+            holes_x: 32,
+            holes_y: 32,
+            hole_pitch_mm: 1.0,
+            hole_diameter_mm: 1.0,
+            views_u: 9,
+            views_v: 9,
+            screen_pixel_pitch_mm: p_s,
+            gap_mm: p_s * 500.0 / 0.6,
+            viewing_distance_mm: 500.0,
+            projectors: crate::physics::spectral::paper_projectors(),
+            l_max: 1.0,
+        }
+    }
+
+    /// A pinhole barrier dense in angle: 48×48 holes of 33 µm at 0.3 mm, 9×9 views 0.75 mm apart at the pupil.
+    /// Its angular freedom exists under geometric optics only: diffraction at 33 µm holes spreads every view
+    /// over about 10 mm at the pupil (resolvability 0.08–0.11), so it stands for displays that do not resolve
+    /// their views, and for the wide kernels eyekey applies by FFT.
+    pub fn dense() -> Self {
         let p_s = 0.3 / 9.0;
         Self {
             aperture: Default::default(),
@@ -216,7 +241,7 @@ impl DisplayGeometry {
         }
     }
 
-    /// A preset by name (`paper`, `secure`, `small`, `lenslet`, `pinhole`).
+    /// A preset by name (`paper`, `secure`, `small`, `lenslet`, `pinhole`, `dense`).
     pub fn preset(name: &str) -> Result<Self, DisplayError> {
         match name {
             "paper" => Ok(Self::paper()),
@@ -224,6 +249,7 @@ impl DisplayGeometry {
             "small" => Ok(Self::small()),
             "lenslet" => Ok(Self::lenslet()),
             "pinhole" => Ok(Self::pinhole()),
+            "dense" => Ok(Self::dense()),
             other => Err(DisplayError::UnknownPreset(other.to_string())),
         }
     }

@@ -403,7 +403,7 @@ mod tests {
 
     #[test]
     fn at_the_design_distance_a_wide_spread_is_held_as_stencils_and_a_traced_one_too_large_is_refused() {
-        // The `secure` preset's 33 µm holes spread every pixel's light through 7×7 apertures at 450 nm. At the
+        // The `dense` preset's 33 µm holes spread every pixel's light through 7×7 apertures at 450 nm. At the
         // design distance one band's operator is 81 view kernels: a few MiB in all, where the expanded sparse
         // form took 2.7 GiB.
         let cache = TransportCache::disabled();
@@ -413,14 +413,14 @@ mod tests {
             ..Default::default()
         };
         let ok = Observer::new(
-            &DisplayGeometry::secure(),
+            &DisplayGeometry::dense(),
             &p,
             EyePosition::default(),
             &opts,
             Optics::Wave,
             &cache,
         )
-        .expect("the secure preset builds under wave optics");
+        .expect("the dense preset builds under wave optics");
         assert!(ok.transports.iter().all(|t| t.is_stencil()));
         let bytes: usize = ok.transports.iter().map(|t| t.memory_bytes()).sum();
         assert!(bytes < 8 << 20, "{bytes}");

@@ -107,10 +107,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_secure_pinholes_do_not_resolve_their_views() {
-        // By hand for the secure preset at its 450 nm band: A = 0.033 mm, s = p_s·d/g, d = 500 mm;
+    fn the_dense_pinholes_do_not_resolve_their_views() {
+        // By hand for the dense preset at its 450 nm band: A = 0.033 mm, s = p_s·d/g, d = 500 mm;
         // M = A·s/(λd). Every band is below 1, and the spread at 550 nm is 1.22·λd/A ≈ 10 mm.
-        let d = DisplayGeometry::secure();
+        let d = DisplayGeometry::dense();
         let r = Resolvability::of(&d);
         assert_eq!(r.bands.len(), d.n_bands());
         for b in &r.bands {

@@ -13,7 +13,7 @@
 //!
 //! This is the same operator as the stencils (`super::stencil`), to rounding: a test checks both products
 //! against them. Its cost is a few FFTs per view whatever the kernels' size, where the stencils' grows with
-//! their taps, so large kernels (the `paper` and `secure` presets' diffraction-limited views) run faster
+//! their taps, so large kernels (the `paper` and `dense` presets' diffraction-limited views) run faster
 //! this way and small ones (lenslet) as stencils; [`fft_is_cheaper`] chooses.
 //!
 //! Spectra are real-to-complex along x (P/2 + 1 frequencies) and complex along y, held column-major
