@@ -174,6 +174,9 @@ pub enum ExperimentCommand {
         /// Only these presets (repeatable; default all).
         #[arg(long)]
         preset: Vec<String>,
+        /// The decoys look through the target's pupil (`decoys_at_target_pupil`).
+        #[arg(long)]
+        decoys_at_target_pupil: bool,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -570,10 +573,11 @@ pub fn run(cli: Cli) -> Result<()> {
             targets,
             population,
             preset,
+            decoys_at_target_pupil,
         }) => {
             print!(
                 "{}",
-                crate::research::defaults::run(&out, targets, population, &preset)?
+                crate::research::defaults::run(&out, targets, population, &preset, decoys_at_target_pupil)?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {

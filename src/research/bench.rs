@@ -777,14 +777,23 @@ impl BenchRun<'_> {
         let encoded = pipeline::encode(
             &spec,
             &cache,
-            &|p| marks.lock().unwrap_or_else(|e| e.into_inner()).push((p, t.elapsed().as_secs_f64())),
+            &|p| {
+                marks
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .push((p, t.elapsed().as_secs_f64()))
+            },
             &cancel,
         )?;
         let t_solved = t.elapsed().as_secs_f64();
         let out = pipeline::write_outputs(&spec, &encoded, &dir.path().join("job"), true, &cache, &|_| {}, &cancel)?;
         let total = t.elapsed().as_secs_f64();
         let marks = marks.into_inner().unwrap_or_else(|e| e.into_inner());
-        let t_cast = marks.iter().find(|m| m.0 >= 0.15 - 1e-9).map(|m| m.1).unwrap_or(t_solved);
+        let t_cast = marks
+            .iter()
+            .find(|m| m.0 >= 0.15 - 1e-9)
+            .map(|m| m.1)
+            .unwrap_or(t_solved);
         let target_reads = out.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false);
         let evaluate_1000 = |label: &str| -> Result<String> {
             let t = Instant::now();
@@ -818,7 +827,7 @@ impl BenchRun<'_> {
         let cold = evaluate_1000("people's operators built")?;
         let warm = evaluate_1000("people's operators cached")?;
         Ok(format!(
-            "Measured {} by `eyekey bench --section job` (release build, transport cache empty at the start): the \
+            "Measured {} by `eyekey bench --section job` ({}, transport cache empty at the start): the \
              `secure` preset, every default option ({} decoys at weight {}, leak weight {}, {} iterations at most, \
              {} sub-rays; evaluation: {} people, camera, key sensitivity, head movement).\n\n{}\
              | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}) |\n\
@@ -826,6 +835,11 @@ impl BenchRun<'_> {
              | of which: solve | {:.1} s ({} iterations, {}) |\n\
              | of which: evaluation and bundle | {:.1} s |\n{cold}{warm}| peak resident memory | {:.0} MB |\n",
             self.stamp,
+            if cfg!(debug_assertions) {
+                "debug build: eyekey-core at opt-level 2"
+            } else {
+                "release build"
+            },
             spec.options.population_decoys,
             spec.options.decoy_weight,
             spec.options.leak_weight,

@@ -429,6 +429,18 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
             HeadBoxMethod::Tracked,
             3.0,
         ),
+        (
+            "with the leak penalty (weight 3), target stacked on a 0.3 mm ring, shown fixed",
+            0.3,
+            HeadBoxMethod::Fixed,
+            3.0,
+        ),
+        (
+            "with the leak penalty (weight 3), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+        ),
     ] {
         let encoding = Encoding {
             label,

@@ -32,8 +32,9 @@ fn slip(width: u32, height: u32, digits: &str) -> (image::RgbImage, DocumentText
 }
 
 /// Runs `targets` held-out targets on every preset (or those named in `only`), each judged with `population`
-/// held-out people. Writes `out/defaults.md`; returns it.
-pub fn run(out: &Path, targets: u32, population: u32, only: &[String]) -> Result<String> {
+/// held-out people; with `decoys_at_target_pupil` the decoys look through the target's pupil. Writes
+/// `out/defaults.md`; returns it.
+pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at_target_pupil: bool) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let mut md = table_header(&[
         "preset",
@@ -46,15 +47,22 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String]) -> Result
     ]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xD0C5);
     for &name in PRESETS {
+        // Every preset's PINs are drawn whether it runs or not, so a run of some presets sees the same documents
+        // as a run of all.
+        let pins: Vec<String> = (0..targets)
+            .map(|_| (0..4).map(|_| char::from(b'0' + rng.gen_range(0..10u8))).collect())
+            .collect();
         if !only.is_empty() && !only.iter().any(|o| o == name) {
             continue;
         }
         let display = DisplayGeometry::preset(name)?;
         let cache = TransportCache::default();
-        let options = EncodeOptions::default();
-        for k in 0..targets {
+        let options = EncodeOptions {
+            decoys_at_target_pupil,
+            ..Default::default()
+        };
+        for (k, digits) in pins.into_iter().enumerate() {
             let target = sample_population(1, 0xD0C5_0000 + k as u64, Default::default()).remove(0);
-            let digits: String = (0..4).map(|_| char::from(b'0' + rng.gen_range(0..10u8))).collect();
             let (document, text) = slip(display.holes_x * 4, display.holes_y * 4, &digits);
             let spec = JobSpec {
                 display: display.clone(),

@@ -148,6 +148,7 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
         "encode",
         "target: legibility, known font",
         "people at the target's position who read (95 % CI)",
+        "… with at most one digit wrong",
         "population legibility p95",
         "camera settings at the target's position that read",
         "best camera",
@@ -195,7 +196,7 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
             .unwrap_or((0, 0, "–".into()));
         writeln!(
             md,
-            "| {} | {t_encode:.0} s | {:.2}, {}{} | {} of {} ({:.1}–{:.1} %) | {:.2} | {cam_read} of {cam_tried} | {cam_best} |",
+            "| {} | {t_encode:.0} s | {:.2}, {}{} | {} of {} ({:.1}–{:.1} %) | {} | {:.2} | {cam_read} of {cam_tried} | {cam_best} |",
             variant.label,
             r.target.legibility,
             known(&r.target),
@@ -204,6 +205,7 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
             p.count,
             100.0 * p.readable_ci95.0,
             100.0 * p.readable_ci95.1,
+            p.known_font_all_but_one.unwrap_or(0),
             p.p95_legibility,
         )?;
         eprintln!("{} (evaluation {t_eval:.0} s)", md.lines().last().unwrap_or(""));

@@ -1030,12 +1030,15 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
 fn secure_population_rows(md: &mut String, p: &PopulationSummary) -> Result<()> {
     writeln!(
         md,
-        "| sampled people who read (the known-font attacker) | {} of {} ({:.1} %, 95 % interval {:.1}–{:.1} %) |",
+        "| sampled people who read (the known-font attacker) | {} of {} ({:.1} %, 95 % interval {:.1}–{:.1} %); with at most one digit wrong: {} |",
         p.readable_count,
         p.count,
         100.0 * p.readable_fraction,
         100.0 * p.readable_ci95.0,
-        100.0 * p.readable_ci95.1
+        100.0 * p.readable_ci95.1,
+        p.known_font_all_but_one
+            .map(|n| n.to_string())
+            .unwrap_or_else(|| "–".into())
     )?;
     writeln!(
         md,
@@ -1137,4 +1140,3 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
     std::fs::write(out.join("results.md"), &md)?;
     Ok(md)
 }
-

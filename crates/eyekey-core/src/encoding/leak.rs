@@ -52,7 +52,9 @@ impl LeakPatterns {
                     q[y * w + x] = blurred[y * w + x];
                 }
             }
-            directions.extend(unit_zero_mean(q, |i| (x0..x1).contains(&(i % w)) && (y0..y1).contains(&(i / w))));
+            directions.extend(unit_zero_mean(q, |i| {
+                (x0..x1).contains(&(i % w)) && (y0..y1).contains(&(i / w))
+            }));
         }
         for ((cx, cy, cw, ch), d) in attacker.map(|a| a.discriminants()).unwrap_or_default() {
             for dy in -1isize..=1 {
@@ -190,7 +192,11 @@ mod tests {
         let mean = inside.iter().sum::<f64>() / inside.len() as f64;
         let centred: f64 = inside.iter().map(|v| (v - mean).powi(2)).sum();
         let c = p.project(&view);
-        assert!((c[0] * c[0] - centred).abs() < 1e-4 * centred, "{} vs {centred}", c[0] * c[0]);
+        assert!(
+            (c[0] * c[0] - centred).abs() < 1e-4 * centred,
+            "{} vs {centred}",
+            c[0] * c[0]
+        );
         assert!(c[1].abs() < 1e-9 && c[2].abs() < 1e-9, "other channels see nothing");
     }
 
@@ -212,7 +218,11 @@ mod tests {
             a[i] += h;
             b[i] -= h;
             let fd = (p.penalty(&a) - p.penalty(&b)) / (2.0 * h as f64);
-            assert!((fd - g[i] as f64).abs() < 1e-3 * (1.0 + fd.abs()), "pixel {i}: {fd} vs {}", g[i]);
+            assert!(
+                (fd - g[i] as f64).abs() < 1e-3 * (1.0 + fd.abs()),
+                "pixel {i}: {fd} vs {}",
+                g[i]
+            );
         }
     }
 }

@@ -471,7 +471,12 @@ mod tests {
         m.value_and_gradient(&xv, &mut g1);
         m.curvature_product(&v, &mut hv);
         let diff: Vec<f32> = g1.iter().zip(&g0).map(|(a, b)| a - b).collect();
-        let err: f64 = diff.iter().zip(&hv).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt();
+        let err: f64 = diff
+            .iter()
+            .zip(&hv)
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum::<f64>()
+            .sqrt();
         let scale = diff.iter().map(|a| (*a as f64).powi(2)).sum::<f64>().sqrt();
         assert!(err <= 1e-3 * scale, "curvature {err} vs {scale}");
         let dm = DiffMaxObjective::new(mk(), &t, 0.05, 0.02);

@@ -64,6 +64,10 @@ pub struct EncodeOptions {
     pub ablation: Option<Ablation>,
     /// Decoy observers sampled from the population, each shown a decoy (0 = only the given observers).
     pub population_decoys: u32,
+    /// Population decoys look through the target's pupil: a sampled person whose pupil is larger than the
+    /// target's is given the target's (their wavefront rescaled to it, ANSI Z80.28 Annex B), so the decoys
+    /// compete for exactly the views the target sees.
+    pub decoys_at_target_pupil: bool,
     /// What decoy observers see.
     pub decoy: DecoyKind,
     /// Weight of each decoy observer's term relative to the target's (1.0).
@@ -127,6 +131,7 @@ impl Default for EncodeOptions {
             optics: Optics::Wave,
             ablation: None,
             population_decoys: 6,
+            decoys_at_target_pupil: false,
             decoy: DecoyKind::Noise,
             decoy_weight: 0.3,
             leak_weight: 3.0,
@@ -206,7 +211,12 @@ impl EncodeOptions {
                 "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
             );
         }
-        if self.camera_decoy_focus_d.len() > 9 || self.camera_decoy_focus_d.iter().any(|f| !(f.is_finite() && f.abs() <= 5.0)) {
+        if self.camera_decoy_focus_d.len() > 9
+            || self
+                .camera_decoy_focus_d
+                .iter()
+                .any(|f| !(f.is_finite() && f.abs() <= 5.0))
+        {
             return bad(
                 "camera_decoy_focus_d",
                 "at most 9 focus settings, each within ±5 D".to_string(),

@@ -274,11 +274,13 @@ impl Cast {
     ) -> Result<(), PipelineError> {
         let o = &spec.options;
         let mut people = spec.observers.clone();
-        people.extend(sample_population(
-            o.population_decoys as usize,
-            o.seed.wrapping_add(1),
-            Default::default(),
-        ));
+        let mut sampled = sample_population(o.population_decoys as usize, o.seed.wrapping_add(1), Default::default());
+        if o.decoys_at_target_pupil {
+            for p in &mut sampled {
+                *p = at_pupil(p, spec.target.pupil_diameter_mm)?;
+            }
+        }
+        people.extend(sampled);
         for (k, p) in people.iter().enumerate() {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
@@ -349,6 +351,22 @@ impl Cast {
         }
         Ok(added)
     }
+}
+
+/// `person` looking through a pupil no larger than `pupil_mm`: a larger pupil is stopped down to it, the
+/// wavefront rescaled (ANSI Z80.28 Annex B, `ZernikeCoefficients::rescaled`).
+fn at_pupil(person: &VisionProfile, pupil_mm: f64) -> Result<VisionProfile, PipelineError> {
+    if person.pupil_diameter_mm <= pupil_mm {
+        return Ok(person.clone());
+    }
+    let bad = |e: crate::physics::zernike::ZernikeError| PipelineError::internal("rescaling a decoy's wavefront", e);
+    let z = crate::physics::zernike::ZernikeCoefficients::new(person.pupil_diameter_mm, person.zernike_um.clone())
+        .map_err(bad)?;
+    Ok(VisionProfile {
+        zernike_um: z.rescaled(pupil_mm).map_err(bad)?.coefficients_um,
+        pupil_diameter_mm: pupil_mm,
+        ..person.clone()
+    })
 }
 
 /// An observer that cannot be built: the display's fault when its wave-optics operator is too large, the
@@ -753,6 +771,25 @@ mod tests {
         };
         let (leaky, penalised) = (seen(&job(0.0)), seen(&with));
         assert!(penalised < 0.5 * leaky, "with the penalty {penalised}, without {leaky}");
+    }
+
+    #[test]
+    fn a_decoy_is_stopped_down_to_the_target_pupil_but_never_widened() {
+        // Pure defocus c(2,0) on a 7 mm pupil seen through 5 mm: the same dioptric power, so c scales by
+        // (5/7)² (ANSI Z80.28 Annex B for a single second-order term).
+        let mut wide = VisionProfile::perfect();
+        wide.pupil_diameter_mm = 7.0;
+        wide.zernike_um = vec![0.0; 15];
+        wide.zernike_um[4] = 0.49;
+        let narrowed = at_pupil(&wide, 5.0).unwrap();
+        assert_eq!(narrowed.pupil_diameter_mm, 5.0);
+        assert!(
+            (narrowed.zernike_um[4] - 0.49 * (5.0f64 / 7.0).powi(2)).abs() < 1e-9,
+            "{:?}",
+            narrowed.zernike_um
+        );
+        let narrow = at_pupil(&narrowed, 6.0).unwrap();
+        assert_eq!(narrow, narrowed, "a smaller pupil stays as it is");
     }
 
     #[test]

@@ -158,6 +158,9 @@ struct Cell {
     templates: Vec<Vec<f32>>,
 }
 
+/// A character cell's box on the retinal grid: x0, y0, width, height.
+pub type CellBox = (usize, usize, usize, usize);
+
 /// What the attacker made of one view.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
@@ -271,11 +274,15 @@ impl KnownFontAttacker {
     /// What tells each secret cell's true glyph from the others: per cell, its box on the grid (x0, y0, width,
     /// height) and the true glyph's template minus the mean of the other candidates' (row-major in the box). A
     /// view whose cells are orthogonal to these, after the attacker's mean removal, gives the true glyph no edge.
-    pub fn discriminants(&self) -> Vec<((usize, usize, usize, usize), Vec<f32>)> {
+    pub fn discriminants(&self) -> Vec<(CellBox, Vec<f32>)> {
         self.cells
             .iter()
             .map(|c| {
-                let truth = self.alphabet.iter().position(|&a| a == c.truth).expect("the truth is a candidate");
+                let truth = self
+                    .alphabet
+                    .iter()
+                    .position(|&a| a == c.truth)
+                    .expect("the truth is a candidate");
                 let others = (c.templates.len() - 1) as f32;
                 let d = (0..c.w * c.h)
                     .map(|i| {

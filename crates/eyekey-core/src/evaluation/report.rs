@@ -41,6 +41,10 @@ pub struct PopulationSummary {
     /// How many the known-font attacker read (when the document's text is known).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font_readers: Option<u32>,
+    /// How many the known-font attacker read with at most one secret character wrong: the readers of an
+    /// attacker allowed one guess per candidate of the character it is least sure of (10 guesses for a PIN).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub known_font_all_but_one: Option<u32>,
     /// Median legibility.
     pub median_legibility: f64,
     /// 95th-percentile legibility.
@@ -67,9 +71,20 @@ impl PopulationSummary {
                 .filter(|s| s.known_font.as_ref().is_some_and(|k| k.correct))
                 .count() as u32
         });
+        let known_font_all_but_one = known_font_readers.map(|_| {
+            scores
+                .iter()
+                .filter(|s| {
+                    s.known_font
+                        .as_ref()
+                        .is_some_and(|k| k.characters_right + 1 >= k.characters)
+                })
+                .count() as u32
+        });
         Self {
             count: scores.len() as u32,
             readable_count: readable,
+            known_font_all_but_one,
             readable_fraction: readable as f64 / scores.len().max(1) as f64,
             readable_ci95: wilson_interval(readable as u64, scores.len() as u64, 1.959_964),
             known_font_readers,
@@ -227,5 +242,34 @@ mod tests {
             wilson_interval(147, 1000, z)
         );
         assert_eq!(wilson_interval(0, 0, z), (0.0, 1.0));
+    }
+
+    #[test]
+    fn the_known_font_counts_tell_whole_reads_from_reads_one_character_off() {
+        let person = |right: u32| ViewScore {
+            label: format!("{right} right"),
+            legibility: 0.1 * right as f64,
+            ncc: 0.0,
+            psnr_db: 0.0,
+            ssim: 0.0,
+            known_font: Some(crate::evaluation::KnownFontRead {
+                text: String::new(),
+                correct: right == 4,
+                characters_right: right,
+                characters: 4,
+                confidence: 0.5,
+                chance: 1e-4,
+            }),
+            readable: right == 4,
+        };
+        let p = PopulationSummary::from_scores([4, 3, 3, 2, 0].map(person).to_vec());
+        assert_eq!(
+            (p.readable_count, p.known_font_readers, p.known_font_all_but_one),
+            (1, Some(1), Some(3))
+        );
+        let mut plain = person(4);
+        plain.known_font = None;
+        let p = PopulationSummary::from_scores(vec![plain]);
+        assert_eq!((p.known_font_readers, p.known_font_all_but_one), (None, None));
     }
 }
