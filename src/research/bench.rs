@@ -804,14 +804,7 @@ impl BenchRun<'_> {
                 pipeline::OBJECTIVE_LEVEL,
                 &spec.target,
                 &[],
-                &eyekey_core::evaluation::EvaluationOptions {
-                    population: 1000,
-                    document_text: Some(text.clone()),
-                    key_directions: 0,
-                    head_offsets_mm: vec![],
-                    camera_focus_d: vec![],
-                    ..Default::default()
-                },
+                &eyekey_core::evaluation::EvaluationOptions::population_only(1000, Some(text.clone())),
                 &cache,
                 &|_| {},
                 &cancel,

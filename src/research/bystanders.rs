@@ -454,14 +454,9 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
         let (ev, t_eval) = base.evaluate(
             &l,
             &EvaluationOptions {
-                population,
                 optics: Optics::Wave,
-                document_text: Some(text.clone()),
                 sub_rays: 12,
-                key_directions: 0,
-                head_offsets_mm: vec![],
-                camera_focus_d: vec![],
-                ..Default::default()
+                ..EvaluationOptions::population_only(population, Some(text.clone()))
             },
             &|_| {},
         )?;

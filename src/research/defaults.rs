@@ -87,13 +87,8 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at
                 &target,
                 &[],
                 &EvaluationOptions {
-                    population,
                     optics: options.optics,
-                    document_text: Some(text),
-                    key_directions: 0,
-                    head_offsets_mm: vec![],
-                    camera_focus_d: vec![],
-                    ..Default::default()
+                    ..EvaluationOptions::population_only(population, Some(text))
                 },
                 &cache,
                 &|_| {},

@@ -163,15 +163,11 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
         let (ev, t_eval) = base.evaluate(
             &l,
             &EvaluationOptions {
-                population,
                 optics: Optics::Wave,
-                document_text: Some(base.text.clone()),
                 sub_rays: 12,
-                key_directions: 0,
-                head_offsets_mm: vec![],
                 camera_focus_d: cam.camera_focus_d.clone(),
                 camera_apertures_mm: cam.camera_apertures_mm.clone(),
-                ..Default::default()
+                ..EvaluationOptions::population_only(population, Some(base.text.clone()))
             },
             &|_| {},
         )?;

@@ -113,7 +113,7 @@ impl<'a> MultiplexObjective<'a> {
         &self.terms
     }
 
-    /// Each term's weighted, normalised residual w_k‖A_k L − S'_k‖²/‖S'_t‖² at `l`.
+    /// Each term's weighted, normalised value at `l`: w_k‖A_k L − S'_k‖²/‖S'_t‖² plus its leak penalty.
     pub fn term_values(&self, l: &[f32]) -> Vec<f64> {
         self.terms
             .iter()

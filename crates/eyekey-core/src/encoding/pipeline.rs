@@ -78,12 +78,7 @@ pub fn encode(
         let done_before = summary.iterations as f64;
         let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
         let result = solve_round(spec, &cast, x, tied, 1.0, report, cancel)?;
-        summary.iterations += result.iterations;
-        summary.restarts += result.restarts;
-        summary.seconds += result.seconds;
-        summary.objective_history.extend_from_slice(&result.history);
-        (summary.termination, summary.objective, summary.lipschitz) =
-            (result.termination, result.objective, result.lipschitz);
+        absorb(&mut summary, &result);
         x = result.x;
         if round == rounds {
             break;
@@ -100,18 +95,16 @@ pub fn encode(
     // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
     let has_decoys = !cast.others.is_empty();
     let mut scale = 1.0;
+    // Progress so far; each further solve covers half of what is left of the solve's span (up to 0.85).
+    let mut at = (0.15 + 0.7 * summary.iterations as f64 / total_iterations).min(0.85);
     while o.ensure_target_reads && has_decoys && !summary.target_reads && scale > 0.2 {
         scale *= 0.5;
-        let done_before = summary.iterations as f64;
-        let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
+        let (from, span) = (at, (0.85 - at) / 2.0);
+        at += span;
+        let report = |p: Progress| progress(from + span * p.iteration as f64 / o.max_iterations as f64);
         let start = warm_start(&spec.display, &spec.document, tied);
         let result = solve_round(spec, &cast, start, tied, scale, report, cancel)?;
-        summary.iterations += result.iterations;
-        summary.restarts += result.restarts;
-        summary.seconds += result.seconds;
-        summary.objective_history.extend_from_slice(&result.history);
-        (summary.termination, summary.objective, summary.lipschitz) =
-            (result.termination, result.objective, result.lipschitz);
+        absorb(&mut summary, &result);
         l = expand_tied(&spec.display, &result.x, tied);
         summary.decoy_weight_scale = scale;
         summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
@@ -124,6 +117,16 @@ pub fn encode(
         solver: summary,
         document_text,
     })
+}
+
+/// Adds one solve's iterations, restarts, time and history to `summary`, and takes its end state.
+fn absorb(summary: &mut SolverSummary, result: &SolveResult) {
+    summary.iterations += result.iterations;
+    summary.restarts += result.restarts;
+    summary.seconds += result.seconds;
+    summary.objective_history.extend_from_slice(&result.history);
+    (summary.termination, summary.objective, summary.lipschitz) =
+        (result.termination, result.objective, result.lipschitz);
 }
 
 /// Checks that the job's inputs fit together; errors name the input. Returns the document text hint resolved

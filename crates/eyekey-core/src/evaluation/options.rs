@@ -36,6 +36,21 @@ pub struct EvaluationOptions {
     pub bystanders: Option<crate::evaluation::BystanderOptions>,
 }
 
+impl EvaluationOptions {
+    /// Only `population` people at the target's position (with the document's text, when known): no camera, key
+    /// sensitivity or head movement; the other options at their defaults.
+    pub fn population_only(population: u32, document_text: Option<crate::evaluation::DocumentText>) -> Self {
+        Self {
+            population,
+            document_text,
+            key_directions: 0,
+            head_offsets_mm: vec![],
+            camera_focus_d: vec![],
+            ..Default::default()
+        }
+    }
+}
+
 impl Default for EvaluationOptions {
     fn default() -> Self {
         Self {

@@ -138,23 +138,13 @@ impl DisplayGeometry {
     ///
     /// Optically it is the `lenslet` preset on a smaller array: views p_s·d/f = (1/9 mm)·500/92.6 = 0.6 mm apart
     /// at the pupil, resolvability 1.9–2.7 per band, and every lenslet's block of views repeats at the pupil
-    /// every p_h(1 + f/d)·d/f = 6.4 mm. Fewer lenslets keep the encode within seconds; its default options
-    /// ([`crate::encoding::pipeline::EncodeOptions::secure`]) are the encoder frontier's.
+    /// every p_h(1 + f/d)·d/f = 6.4 mm. Fewer lenslets keep the encode within seconds; the default encode
+    /// options were chosen on it (docs/experiments.md §2d).
     pub fn secure() -> Self {
-        let p_s = 1.0 / 9.0;
         Self {
-            aperture: Aperture::Lenslet,
             holes_x: 32,
             holes_y: 32,
-            hole_pitch_mm: 1.0,
-            hole_diameter_mm: 1.0,
-            views_u: 9,
-            views_v: 9,
-            screen_pixel_pitch_mm: p_s,
-            gap_mm: p_s * 500.0 / 0.6,
-            viewing_distance_mm: 500.0,
-            projectors: crate::physics::spectral::paper_projectors(),
-            l_max: 1.0,
+            ..Self::lenslet()
         }
     }
 

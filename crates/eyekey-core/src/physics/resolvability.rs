@@ -107,6 +107,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_secure_lenslets_resolve_their_views() {
+        // By hand: A = 1 mm, s = p_s·d/f = (1/9)·500/92.59 = 0.6 mm, d = 500 mm, so M = A·s/(λd) = 1.2e-3/λ[mm]:
+        // 2.67 at 450 nm and 1.88 at 640 nm.
+        let d = DisplayGeometry::secure();
+        assert!((d.view_spacing_at_pupil_mm() - 0.6).abs() < 1e-9);
+        let r = Resolvability::of(&d);
+        for b in &r.bands {
+            let by_hand = 1.0 * 0.6 / (b.wavelength_nm * 1e-6 * 500.0);
+            assert!(
+                (b.resolvability - by_hand).abs() < 1e-9 && b.resolvability > 1.8,
+                "{b:?}"
+            );
+        }
+        assert!(!r.any_unresolved() && r.warning().is_none());
+    }
+
+    #[test]
     fn the_dense_pinholes_do_not_resolve_their_views() {
         // By hand for the dense preset at its 450 nm band: A = 0.033 mm, s = p_s·d/g, d = 500 mm;
         // M = A·s/(λd). Every band is below 1, and the spread at 550 nm is 1.22·λd/A ≈ 10 mm.
