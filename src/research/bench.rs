@@ -748,19 +748,13 @@ impl BenchRun<'_> {
     /// and with the people's operators cached.
     fn job(&self) -> Result<String> {
         let display = DisplayGeometry::secure();
-        let g = (display.holes_x * 4, display.holes_y * 4);
-        let text = eyekey_core::evaluation::DocumentText {
-            lines: vec!["PIN".into(), "4821".into()],
-            scale: (g.0 / 28).max(1),
-            alphabet: "0123456789".into(),
-        };
-        let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+        let (document, text) = super::experiment::pin_slip_of(display.holes_x * 4, display.holes_y * 4, "4821");
         let spec = JobSpec {
             display: display.clone(),
             target: eyekey_core::physics::population::sample_population(1, 4242, Default::default()).remove(0),
             target_label: "bench".into(),
             observers: vec![],
-            document: eyekey_core::imaging::glyphs::render_text(&lines, g.0, g.1, text.scale),
+            document,
             decoy: None,
             options: EncodeOptions {
                 document_text: Some(text.clone()),

@@ -12,24 +12,13 @@ use std::time::Instant;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 
+use super::experiment::pin_slip_of;
 use super::table_header;
 use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
-use eyekey_core::evaluation::{evaluate, DocumentText, EvaluationOptions};
+use eyekey_core::evaluation::{evaluate, EvaluationOptions};
 use eyekey_core::physics::display::{DisplayGeometry, PRESETS};
 use eyekey_core::physics::population::sample_population;
 use eyekey_core::physics::transport::TransportCache;
-
-/// A PIN slip `width`×`height` with `digits`, and its text hint.
-fn slip(width: u32, height: u32, digits: &str) -> (image::RgbImage, DocumentText) {
-    let text = DocumentText {
-        lines: vec!["PIN".into(), digits.into()],
-        scale: (width / 28).max(1),
-        alphabet: "0123456789".into(),
-    };
-    let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
-    let img = eyekey_core::imaging::glyphs::render_text(&lines, width, height, text.scale);
-    (img, text)
-}
 
 /// Runs `targets` held-out targets on every preset (or those named in `only`), each judged with `population`
 /// held-out people; with `decoys_at_target_pupil` the decoys look through the target's pupil. Writes
@@ -63,7 +52,7 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at
         };
         for (k, digits) in pins.into_iter().enumerate() {
             let target = sample_population(1, 0xD0C5_0000 + k as u64, Default::default()).remove(0);
-            let (document, text) = slip(display.holes_x * 4, display.holes_y * 4, &digits);
+            let (document, text) = pin_slip_of(display.holes_x * 4, display.holes_y * 4, &digits);
             let spec = JobSpec {
                 display: display.clone(),
                 target: target.clone(),
@@ -95,12 +84,7 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at
                 &AtomicBool::new(false),
             )?;
             let r = &ev.report;
-            let kf = r
-                .target
-                .known_font
-                .as_ref()
-                .map(|k| format!("\"{}\" ({}/{})", k.text, k.characters_right, k.characters))
-                .unwrap_or_else(|| "–".into());
+            let kf = super::known_font_cell(&r.target);
             let p = r.population.as_ref().expect("a population was asked for");
             writeln!(
                 md,

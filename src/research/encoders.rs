@@ -173,12 +173,6 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
         )?;
         let r = &ev.report;
         let p = r.population.as_ref().expect("a population was asked for");
-        let known = |s: &eyekey_core::evaluation::ViewScore| {
-            s.known_font
-                .as_ref()
-                .map(|k| format!("\"{}\" ({}/{})", k.text, k.characters_right, k.characters))
-                .unwrap_or_else(|| "–".into())
-        };
         let (cam_read, cam_tried, cam_best) = r
             .camera
             .as_ref()
@@ -186,7 +180,12 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
                 (
                     c.tried.iter().filter(|s| s.readable).count(),
                     c.tried.len(),
-                    format!("{:.2}, {} ({})", c.best.legibility, known(&c.best), c.best.label),
+                    format!(
+                        "{:.2}, {} ({})",
+                        c.best.legibility,
+                        super::known_font_cell(&c.best),
+                        c.best.label
+                    ),
                 )
             })
             .unwrap_or((0, 0, "–".into()));
@@ -195,7 +194,7 @@ pub fn run(out: &Path, population: u32, max_iterations: u32, only: Option<&str>)
             "| {} | {t_encode:.0} s | {:.2}, {}{} | {} of {} ({:.1}–{:.1} %) | {} | {:.2} | {cam_read} of {cam_tried} | {cam_best} |",
             variant.label,
             r.target.legibility,
-            known(&r.target),
+            super::known_font_cell(&r.target),
             if r.target.readable { "" } else { " **not read**" },
             p.readable_count,
             p.count,

@@ -66,15 +66,28 @@ pub fn paper_observers() -> Vec<(String, VisionProfile)> {
 
 /// A PIN slip: the test document of the experiments.
 pub fn pin_slip(width: u32, height: u32) -> RgbImage {
-    let text = pin_slip_text(width);
-    let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
-    eyekey_core::imaging::glyphs::render_text(&lines, width, height, text.scale)
+    pin_slip_of(width, height, "4821").0
 }
 
 /// The text of [`pin_slip`] `width` pixels wide, for the known-font attacker: the digits are secret.
 pub fn pin_slip_text(width: u32) -> eyekey_core::evaluation::DocumentText {
+    pin_slip_text_of(width, "4821")
+}
+
+/// A PIN slip showing `digits`, and its text hint.
+pub fn pin_slip_of(width: u32, height: u32, digits: &str) -> (RgbImage, eyekey_core::evaluation::DocumentText) {
+    let text = pin_slip_text_of(width, digits);
+    let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
+    (
+        eyekey_core::imaging::glyphs::render_text(&lines, width, height, text.scale),
+        text,
+    )
+}
+
+/// The text hint of a PIN slip `width` pixels wide showing `digits`.
+fn pin_slip_text_of(width: u32, digits: &str) -> eyekey_core::evaluation::DocumentText {
     eyekey_core::evaluation::DocumentText {
-        lines: vec!["PIN".into(), "4821".into()],
+        lines: vec!["PIN".into(), digits.into()],
         scale: (width / 28).max(1),
         alphabet: "0123456789".into(),
     }
@@ -1068,7 +1081,7 @@ fn secure_attacker_rows(md: &mut String, r: &Report) -> Result<()> {
             c.best
                 .known_font
                 .as_ref()
-                .map(|k| format!(", known font \"{}\" ({}/{})", k.text, k.characters_right, k.characters))
+                .map(|_| format!(", known font {}", super::known_font_cell(&c.best)))
                 .unwrap_or_default(),
             c.best.label,
             c.tried.iter().filter(|s| s.readable).count(),

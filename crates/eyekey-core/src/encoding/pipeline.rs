@@ -52,12 +52,8 @@ pub fn encode(
     // The evaluation's judge: the known-font attacker where the text is known (adaptive rounds rank candidates
     // by legibility alone).
     let mut reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
-    if let Some(t) = &document_text {
-        let (w, h) = spec.document.dimensions();
-        reference = reference.with_known_font(
-            crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height)
-                .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?,
-        );
+    if let Some(attacker) = cast.attacker.clone() {
+        reference = reference.with_known_font(attacker);
     }
     let mut summary = SolverSummary {
         algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
@@ -214,6 +210,8 @@ struct Cast {
     decoy_objectives: Vec<Vec<f32>>,
     /// What no decoy may see (the leak penalty's directions), when `leak_weight` > 0.
     leak: Option<LeakPatterns>,
+    /// The known-font attacker on the target's grid, when the document's text is known.
+    attacker: Option<crate::evaluation::KnownFontAttacker>,
 }
 
 impl Cast {
@@ -235,19 +233,17 @@ impl Cast {
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
-        let leak = if o.leak_weight > 0.0 {
-            let g = target.grid();
-            let (w, h) = spec.document.dimensions();
-            let attacker = text
-                .map(|t| crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height))
-                .transpose()
-                .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
-            Some(LeakPatterns::new(&spec.document, g.width, g.height, attacker.as_ref()))
-        } else {
-            None
-        };
+        let g = target.grid();
+        let (w, h) = spec.document.dimensions();
+        let attacker = text
+            .map(|t| crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height))
+            .transpose()
+            .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
+        let leak =
+            (o.leak_weight > 0.0).then(|| LeakPatterns::new(&spec.document, g.width, g.height, attacker.as_ref()));
         let mut cast = Self {
             leak,
+            attacker,
             moved: head_box_observers(spec, cache)?,
             others: Vec::new(),
             decoy_objectives: Vec::new(),
