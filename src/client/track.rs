@@ -34,7 +34,6 @@ pub fn track_bundle(bundle: &Path, x_mm: f64, y_mm: f64, out: &Path) -> Result<M
     }
     let meta = BundleMeta {
         profile_label: b.manifest.profile_label.clone(),
-        document_sha256: b.manifest.document_sha256.clone(),
         encoder,
         solver: b.manifest.solver.clone(),
     };

@@ -102,6 +102,16 @@ impl Application {
             display_warnings: Default::default(),
             config,
         }));
+        // Before any worker or request: seal what an older version stored in clear, then sweep leftovers.
+        let (docs, jobs) = super::retention::seal_unsealed(&state)
+            .await
+            .context("sealing stored data")?;
+        if docs + jobs > 0 {
+            tracing::info!(documents = docs, jobs, "sealed data stored before sealing");
+        }
+        super::retention::sweep(&state)
+            .await
+            .context("sweeping leftovers in the data directory")?;
         let router = router(state.clone());
         Ok(Self {
             listener,
@@ -152,6 +162,7 @@ impl Application {
         } = self;
         tracing::info!(address = %listener.local_addr()?, workers = state.config.workers, "eyekey serving");
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
+        let retention = super::retention::spawn_retention(&state);
 
         let signal_shutdown = shutdown.clone();
         tokio::spawn(async move {
@@ -184,6 +195,7 @@ impl Application {
             );
             workers.abort_all();
         }
+        retention.abort();
         state.db.close().await;
         state.writer.0.close().await;
         tracing::info!("eyekey stopped");

@@ -51,6 +51,10 @@ pub struct ServeArgs {
     /// Memory bound of the transport-operator cache shared by all jobs, MiB (0 disables it).
     #[arg(long, env = "EYEKEY_TRANSPORT_CACHE_MB", default_value_t = 512)]
     pub transport_cache_mb: usize,
+    /// Days after which documents, jobs and their bundles are deleted (checked hourly); 0 keeps them until
+    /// deleted by hand. Profiles never expire.
+    #[arg(long, env = "EYEKEY_RETENTION_DAYS", default_value_t = 30, value_parser = clap::value_parser!(u32).range(0..=36500))]
+    pub retention_days: u32,
 }
 
 /// Everything the service needs to start. Its `Debug` hides the secrets.
@@ -72,6 +76,8 @@ pub struct Config {
     pub queue: QueueConfig,
     /// Memory bound of the process-wide transport-operator cache, bytes.
     pub transport_cache_bytes: usize,
+    /// Age after which documents, jobs and bundles are deleted; `None` keeps them.
+    pub retention: Option<Duration>,
 }
 
 /// Request and upload limits.
@@ -134,6 +140,7 @@ impl Config {
             limits: Limits::default(),
             queue: QueueConfig::default(),
             transport_cache_bytes: 512 << 20,
+            retention: Some(Duration::from_secs(30 * 86_400)),
         }
     }
 
@@ -164,6 +171,7 @@ impl From<ServeArgs> for Config {
                 ..QueueConfig::default()
             },
             transport_cache_bytes: a.transport_cache_mb.saturating_mul(1 << 20),
+            retention: (a.retention_days > 0).then(|| Duration::from_secs(u64::from(a.retention_days) * 86_400)),
         }
     }
 }
@@ -188,6 +196,7 @@ impl std::fmt::Debug for Config {
             .field("limits", &self.limits)
             .field("queue", &self.queue)
             .field("transport_cache_bytes", &self.transport_cache_bytes)
+            .field("retention", &self.retention)
             .finish()
     }
 }

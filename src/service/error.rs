@@ -77,6 +77,9 @@ pub enum ApiError {
     /// The service cannot serve the request right now (503).
     #[error("{0}")]
     Unavailable(String),
+    /// The data directory is full: nothing was stored; retry when space is freed (507).
+    #[error("{0}")]
+    InsufficientStorage(String),
     /// A response produced below the handlers (routing, timeouts, limits) with only a status code.
     #[error("{}", .0.canonical_reason().unwrap_or("error"))]
     Status(StatusCode),
@@ -106,6 +109,7 @@ impl ApiError {
             Self::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Self::UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             Self::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            Self::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
             Self::Status(s) => *s,
             Self::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
@@ -121,6 +125,7 @@ impl ApiError {
             Self::TooLarge { .. } => "too_large".into(),
             Self::UnsupportedMediaType(_) => "unsupported_media_type".into(),
             Self::Unavailable(_) => "unavailable".into(),
+            Self::InsufficientStorage(_) => "insufficient_storage".into(),
             Self::Status(s) => s
                 .canonical_reason()
                 .unwrap_or("error")
@@ -138,8 +143,56 @@ impl ApiError {
     }
 }
 
+impl ApiError {
+    /// An I/O error of storing something: a full disk (or quota) is a 507 naming the cause, a read-only
+    /// data directory a 503; anything else is internal.
+    pub fn from_io(e: std::io::Error) -> Self {
+        match storage_problem(&e) {
+            Some(problem) => problem,
+            None => Self::Internal(e.into()),
+        }
+    }
+}
+
+/// The 507 or 503 an I/O error means for storage, if it is one of those.
+fn storage_problem(e: &std::io::Error) -> Option<ApiError> {
+    const ENOSPC: i32 = 28;
+    const EROFS: i32 = 30;
+    const EDQUOT: i32 = 122;
+    match (e.kind(), e.raw_os_error()) {
+        (std::io::ErrorKind::StorageFull, _) | (_, Some(ENOSPC | EDQUOT)) => Some(ApiError::InsufficientStorage(
+            "the data directory is full; nothing was stored. Free space and retry".into(),
+        )),
+        (std::io::ErrorKind::ReadOnlyFilesystem, _) | (_, Some(EROFS)) => Some(ApiError::Unavailable(
+            "the data directory is read-only; nothing was stored".into(),
+        )),
+        _ => None,
+    }
+}
+
+/// True when a database error is SQLite's "database or disk is full" (SQLITE_FULL, 13).
+pub fn is_disk_full(e: &sqlx::Error) -> bool {
+    match e {
+        sqlx::Error::Database(d) => {
+            d.code().is_some_and(|c| c == "13" || c.starts_with("13")) || d.message().contains("disk is full")
+        }
+        sqlx::Error::Io(io) => storage_problem(io).is_some(),
+        _ => false,
+    }
+}
+
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
+        if is_disk_full(&e) {
+            return Self::InsufficientStorage(
+                "the data directory is full; nothing was stored. Free space and retry".into(),
+            );
+        }
+        if let sqlx::Error::Database(d) = &e {
+            if d.message().contains("readonly") {
+                return Self::Unavailable("the data directory is read-only; nothing was stored".into());
+            }
+        }
         Self::Internal(e.into())
     }
 }

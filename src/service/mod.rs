@@ -17,7 +17,9 @@ pub mod error;
 pub mod images;
 pub mod jobs;
 pub mod openapi;
+pub mod retention;
 pub mod routes;
+pub mod sealed;
 pub mod state;
 pub mod store;
 

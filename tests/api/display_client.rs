@@ -116,13 +116,25 @@ async fn display_client_refuses_a_corrupted_bundle_and_keeps_showing_the_last_go
     let cfg = client(&app, &f.display_token, out.path());
     sync_once(&cfg).await.unwrap();
 
-    // The next bundle is damaged on the server's disk: one byte in the middle of the zip (frame data).
+    // The next bundle is damaged before it was sealed (as if the encoder's output had been): one byte in
+    // the middle of the zip (frame data). The server serves what it sealed; the client must catch it.
     let bad = finished_job(&app, &f).await;
-    let zip = app.data_dir.join("jobs").join(bad.to_string()).join("bundle.zip");
-    let mut bytes = std::fs::read(&zip).unwrap();
+    let zip = app
+        .data_dir
+        .join("jobs")
+        .join(format!("{bad}-1"))
+        .join("bundle.zip.sealed");
+    let key = eyekey::service::sealed::unwrap_key(
+        &app.state.master_key,
+        app.job_row(&bad.to_string()).await.data_key.as_deref(),
+        &eyekey::service::sealed::job_key_aad(&bad.to_string()),
+    )
+    .unwrap();
+    let aad = eyekey::service::sealed::job_file_aad(&bad.to_string(), "bundle.zip");
+    let mut bytes = key.open(&std::fs::read(&zip).unwrap(), &aad).unwrap();
     let middle = bytes.len() / 2;
     bytes[middle] ^= 0x55;
-    std::fs::write(&zip, bytes).unwrap();
+    std::fs::write(&zip, key.seal(&bytes, &aad).unwrap()).unwrap();
 
     let err = sync_once(&cfg).await.unwrap_err();
     assert!(matches!(err, ClientError::Bundle { job, .. } if job == bad), "{err:?}");

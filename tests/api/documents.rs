@@ -16,14 +16,26 @@ async fn upload(app: &TestApp, content_type: &str, body: Vec<u8>) -> reqwest::Re
 }
 
 #[tokio::test]
-async fn a_png_or_jpeg_document_is_stored_with_its_size_and_checksum() {
+async fn a_png_or_jpeg_document_is_stored_with_its_size_and_a_keyed_digest() {
     let app = spawn_app().await;
     let png = document_png(30, 20);
     let doc = expect_json(upload(&app, "image/png", png.clone()).await, StatusCode::CREATED).await;
     assert_eq!((doc["width"].as_i64(), doc["height"].as_i64()), (Some(30), Some(20)));
     assert_eq!(doc["content_type"], "image/png");
+    // A keyed digest: the same upload gives the same value, and it is not the plain SHA-256 (which would
+    // let anyone holding it confirm a guessed document).
     use sha2::Digest as _;
-    assert_eq!(doc["sha256"], hex::encode(sha2::Sha256::digest(&png)));
+    let mac = doc["content_mac"].as_str().unwrap();
+    assert_eq!(mac.len(), 64);
+    assert_ne!(mac, hex::encode(sha2::Sha256::digest(&png)));
+    assert_eq!(
+        mac,
+        app.state
+            .master_key
+            .digest(eyekey::service::routes::documents::DOCUMENT_MAC, &png)
+    );
+    let again = expect_json(upload(&app, "image/png", png.clone()).await, StatusCode::CREATED).await;
+    assert_eq!(again["content_mac"], doc["content_mac"]);
     let got = expect_json(
         app.op_get(&format!("/v1/documents/{}", doc["id"].as_str().unwrap()))
             .await,

@@ -4,7 +4,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use eyekey::service::jobs::bundle;
 use eyekey::service::store;
 use eyekey::service::{AppState, Application, Config, ShutdownHandle};
 use eyekey_core::physics::display::DisplayGeometry;
@@ -253,6 +252,14 @@ impl TestApp {
         }
     }
 
+    /// A live job's row as stored.
+    pub async fn job_row(&self, id: &str) -> store::jobs::JobRow {
+        store::jobs::get(&self.state.db, id.parse().unwrap())
+            .await
+            .unwrap()
+            .expect("a live job")
+    }
+
     /// Claims the next job directly and completes it with a hand-made bundle (frames, mask, manifest,
     /// report and a view), as a worker would after a successful solve. Returns the job id.
     pub async fn complete_with_fake_bundle(&self) -> String {
@@ -265,22 +272,40 @@ impl TestApp {
         .await
         .unwrap()
         .expect("a queued job");
-        let dir = self.data_dir.join("jobs").join(job.id.to_string());
-        std::fs::create_dir_all(dir.join("views")).unwrap();
-        for name in ["frame_0.png", "frame_1.png", "barrier_mask.png"] {
-            std::fs::write(dir.join(name), document_png(4, 4)).unwrap();
-        }
-        std::fs::write(dir.join("manifest.json"), br#"{"files": []}"#).unwrap();
-        std::fs::write(dir.join("report.json"), br#"{"summary": {"target_psnr_db": 30.0}}"#).unwrap();
-        std::fs::write(dir.join("views").join("target.png"), document_png(4, 4)).unwrap();
-        let files = bundle::seal_bundle(&dir).unwrap();
+        let relative = format!("jobs/{}-{}", job.id, job.attempts);
+        let dir = self.data_dir.join(&relative);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut outputs: Vec<(String, Vec<u8>)> = ["frame_0.png", "frame_1.png", "barrier_mask.png"]
+            .iter()
+            .map(|n| (n.to_string(), document_png(4, 4)))
+            .collect();
+        outputs.push(("manifest.json".into(), br#"{"files": []}"#.to_vec()));
+        outputs.push((
+            "report.json".into(),
+            br#"{"summary": {"target_psnr_db": 30.0}}"#.to_vec(),
+        ));
+        outputs.push(("views/target.png".into(), document_png(4, 4)));
+        let id = job.id.to_string();
+        let key = eyekey::service::sealed::unwrap_key(
+            &self.state.master_key,
+            job.data_key.as_deref(),
+            &eyekey::service::sealed::job_key_aad(&id),
+        )
+        .unwrap();
+        let files = eyekey::service::jobs::seal_outputs(&dir, &key, &id, &outputs).unwrap();
         let ok = store::jobs::mark_succeeded(
             &self.state.writer,
             job.id,
             job.attempts,
             &store::jobs::Success {
-                evaluation_summary: Some(r#"{"target_psnr_db": 30.0}"#.into()),
-                bundle_path: format!("jobs/{}", job.id),
+                sealed_summary: Some(
+                    key.seal(
+                        br#"{"target_psnr_db": 30.0}"#,
+                        &eyekey::service::sealed::job_summary_aad(&id),
+                    )
+                    .unwrap(),
+                ),
+                bundle_path: relative,
                 bundle_files: serde_json::to_string(&files).unwrap(),
                 solve_ms: 5,
             },

@@ -306,14 +306,21 @@ async fn the_event_stream_sends_the_job_then_each_change_and_ends_when_it_ends()
 }
 
 #[tokio::test]
-async fn a_deleted_profile_cancels_its_queued_jobs() {
+async fn a_deleted_profile_takes_its_queued_jobs_with_it() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
     app.op_delete(&format!("/v1/profiles/{}", f.profile_id)).await;
-    let job = app.job(&id).await;
-    assert_eq!(job["state"], "cancelled");
-    assert!(job["last_error"].as_str().unwrap().contains("deleted"));
+    let r = app.op_get(&format!("/v1/jobs/{id}")).await;
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    let (state, error): (String, String) = sqlx::query_as("SELECT state, last_error FROM jobs WHERE id = ?")
+        .bind(&id)
+        .fetch_one(&app.state.db)
+        .await
+        .unwrap();
+    assert_eq!(state, "cancelled", "never run");
+    assert!(error.contains("deleted"), "{error}");
+    assert_eq!(eyekey::service::try_execute_next_job(&app.state).await.unwrap(), None);
 }
 
 /// Runs the real encoder: the cancel request reaches the solver between iterations.

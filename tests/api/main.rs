@@ -20,3 +20,4 @@ mod operations;
 mod profiles;
 mod queue;
 mod restart;
+mod sealed;

@@ -122,7 +122,7 @@ async fn jobs_are_claimed_oldest_first() {
 }
 
 #[tokio::test]
-async fn a_job_whose_inputs_were_deleted_fails_without_retrying() {
+async fn a_job_whose_inputs_vanish_after_it_was_claimed_ends_without_retrying() {
     let app = spawn_app().await;
     let f = app.fixtures().await;
     let mut body = crate::helpers::job_body(&f);
@@ -133,20 +133,26 @@ async fn a_job_whose_inputs_were_deleted_fails_without_retrying() {
         .as_str()
         .unwrap()
         .to_string();
+    let claimed = store::jobs::claim_next(&app.state.writer, "w", Duration::from_secs(30), store::now_ms())
+        .await
+        .unwrap()
+        .unwrap();
+    // The observer is deleted between the claim and the load: the job goes with it.
     app.op_delete(&format!("/v1/profiles/{observer}")).await;
-    assert_eq!(
-        try_execute_next_job(&app.state).await.unwrap().map(|j| j.to_string()),
-        Some(id.clone())
-    );
-    let job = app.job(&id).await;
-    assert_eq!(
-        (job["state"].as_str(), job["attempts"].as_i64()),
-        (Some("failed"), Some(1))
-    );
-    assert!(
-        job["last_error"].as_str().unwrap().contains("observer profile"),
-        "{job}"
-    );
+    eyekey::service::jobs::execute_claimed(&app.state, claimed)
+        .await
+        .unwrap();
+    let (state, attempts, error): (String, i64, Option<String>) =
+        sqlx::query_as("SELECT state, attempts, last_error FROM jobs WHERE id = ?")
+            .bind(&id)
+            .fetch_one(&app.state.db)
+            .await
+            .unwrap();
+    assert_eq!((state.as_str(), attempts), ("failed", 1), "{error:?}");
+    assert!(error.unwrap().contains("observer profile"));
+    assert_eq!(try_execute_next_job(&app.state).await.unwrap(), None, "never retried");
+    let r = app.op_get(&format!("/v1/jobs/{id}")).await;
+    assert_eq!(r.status(), reqwest::StatusCode::NOT_FOUND, "deleted with the profile");
 }
 
 #[tokio::test]

@@ -60,7 +60,7 @@ async fn a_job_running_at_shutdown_completes_exactly_once_after_restart() {
         .collect();
     assert_eq!(
         outputs,
-        vec![std::ffi::OsString::from(&id)],
+        vec![std::ffi::OsString::from(format!("{id}-1"))],
         "one output, no temporary leftovers"
     );
     let succeeded: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM jobs WHERE state = 'succeeded'")

@@ -1,12 +1,11 @@
 //! Frame bundles: which files of a job's output a display may fetch, and the zip that carries them.
 //!
-//! A job's output directory holds the bundle (`frame_<n>.png`, `barrier_mask.png`, `manifest.json`) and
-//! operator-only files (`report.json`, `views/`), which may reveal profile-derived data. Only bundle
-//! files are listed, zipped and served to displays.
+//! A job's outputs are the bundle (`frame_<n>.png`, `barrier_mask.png`, `manifest.json`) and operator-only
+//! files (`report.json`, `views/`), which show the document and may reveal profile-derived data. Only bundle
+//! files are listed, zipped and served to displays. Every one of them is stored sealed
+//! ([`crate::service::sealed`]).
 
-use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Write as _};
-use std::path::Path;
+use std::io::{self, Write as _};
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -56,50 +55,38 @@ fn sort_key(name: &str) -> (u8, u64, String) {
     }
 }
 
-fn sha256_file(path: &Path) -> io::Result<(u64, String)> {
-    let mut hasher = Sha256::new();
-    let n = io::copy(&mut BufReader::new(File::open(path)?), &mut hasher)?;
-    Ok((n, hex::encode(hasher.finalize())))
-}
-
-/// Lists and hashes the bundle files in `dir` (frames in numeric order), then writes `bundle.zip` with
-/// them; the zip is written under a temporary name and renamed, so it exists only when complete.
-pub fn seal_bundle(dir: &Path) -> io::Result<Vec<BundleFile>> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)?
-        .filter_map(|e| e.ok())
-        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
-        .filter_map(|e| e.file_name().into_string().ok())
-        .filter(|n| is_bundle_file(n))
-        .collect();
-    names.sort_by_key(|n| sort_key(n));
-    if !names.iter().any(|n| n.starts_with("frame_")) {
+/// The bundle files among a job's outputs (frames in numeric order, then the mask and the manifest),
+/// listed with their sizes and SHA-256, and the zip that carries them, built in memory.
+pub fn zip_bundle(outputs: &[(String, Vec<u8>)]) -> io::Result<(Vec<BundleFile>, Vec<u8>)> {
+    let mut bundle: Vec<&(String, Vec<u8>)> = outputs.iter().filter(|(n, _)| is_bundle_file(n)).collect();
+    bundle.sort_by_key(|(n, _)| sort_key(n));
+    if !bundle.iter().any(|(n, _)| n.starts_with("frame_")) {
         return Err(io::Error::other("the encoder wrote no frame_<n>.png"));
     }
-    let mut files = Vec::with_capacity(names.len());
-    for name in names {
-        let (bytes, sha256) = sha256_file(&dir.join(&name))?;
-        files.push(BundleFile { name, bytes, sha256 });
-    }
-    let part = dir.join(format!("{ZIP_NAME}.part"));
-    let mut zip = zip::ZipWriter::new(BufWriter::new(File::create(&part)?));
-    for f in &files {
+    let files: Vec<BundleFile> = bundle
+        .iter()
+        .map(|(name, bytes)| BundleFile {
+            name: name.clone(),
+            bytes: bytes.len() as u64,
+            sha256: hex::encode(Sha256::digest(bytes)),
+        })
+        .collect();
+    let mut zip = zip::ZipWriter::new(io::Cursor::new(Vec::new()));
+    for (name, bytes) in &bundle {
         // PNGs are already deflated; storing them keeps the zip fast to write and to read.
-        let method = if f.name.ends_with(".png") {
+        let method = if name.ends_with(".png") {
             zip::CompressionMethod::Stored
         } else {
             zip::CompressionMethod::Deflated
         };
         let options = zip::write::SimpleFileOptions::default()
             .compression_method(method)
-            .large_file(f.bytes >= u32::MAX as u64);
-        zip.start_file(f.name.as_str(), options).map_err(io::Error::other)?;
-        io::copy(&mut BufReader::new(File::open(dir.join(&f.name))?), &mut zip)?;
+            .large_file(bytes.len() as u64 >= u32::MAX as u64);
+        zip.start_file(name.as_str(), options).map_err(io::Error::other)?;
+        zip.write_all(bytes)?;
     }
-    let mut inner = zip.finish().map_err(io::Error::other)?;
-    inner.flush()?;
-    inner.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-    std::fs::rename(&part, dir.join(ZIP_NAME))?;
-    Ok(files)
+    let zipped = zip.finish().map_err(io::Error::other)?.into_inner();
+    Ok((files, zipped))
 }
 
 #[cfg(test)]
@@ -125,26 +112,32 @@ mod tests {
     }
 
     #[test]
-    fn sealing_zips_bundle_files_in_frame_order_and_leaves_the_rest_out() {
-        let dir = tempfile::tempdir().unwrap();
-        for name in [
+    fn the_zip_carries_bundle_files_in_frame_order_and_leaves_the_rest_out() {
+        let outputs: Vec<(String, Vec<u8>)> = [
             "frame_10.png",
             "frame_2.png",
             "barrier_mask.png",
             "manifest.json",
             "report.json",
-        ] {
-            std::fs::write(dir.path().join(name), name.as_bytes()).unwrap();
-        }
-        let files = seal_bundle(dir.path()).unwrap();
+            "views/target.png",
+        ]
+        .iter()
+        .map(|n| (n.to_string(), n.as_bytes().to_vec()))
+        .collect();
+        let (files, zipped) = zip_bundle(&outputs).unwrap();
         let names: Vec<_> = files.iter().map(|f| f.name.as_str()).collect();
         assert_eq!(
             names,
             ["frame_2.png", "frame_10.png", "barrier_mask.png", "manifest.json"]
         );
-        let zip = zip::ZipArchive::new(File::open(dir.path().join(ZIP_NAME)).unwrap()).unwrap();
+        let mut zip = zip::ZipArchive::new(io::Cursor::new(zipped)).unwrap();
         assert_eq!(zip.len(), 4);
         assert!(zip.index_for_name("report.json").is_none());
+        let mut frame = String::new();
+        io::Read::read_to_string(&mut zip.by_name("frame_2.png").unwrap(), &mut frame).unwrap();
+        assert_eq!(frame, "frame_2.png");
         assert_eq!(files[0].sha256, hex::encode(Sha256::digest(b"frame_2.png")));
+        assert_eq!(files[0].bytes, 11);
+        assert!(zip_bundle(&outputs[2..4]).is_err(), "a bundle without frames");
     }
 }

@@ -1,11 +1,13 @@
 //! Job execution: the worker pool, and the single worker step the tests drive by hand.
 //!
 //! A worker claims a job (see [`crate::service::store::jobs`]), loads and opens its inputs, and runs
-//! [`eyekey_core::encoding::pipeline::run_job`] on a blocking thread (the pipeline spreads its work over the rayon pool;
-//! tokio's worker threads never solve). Meanwhile the async side renews the lease (every third of it,
-//! and at least every 500 ms), writes progress, and forwards a cancel request to the solver's flag.
-//! Output goes to `<data>/jobs/.tmp-<job>-<attempt>/` and is renamed to `<data>/jobs/<job>/` only when
-//! the bundle and its zip are complete, so a bundle is never visible half-written.
+//! [`eyekey_core::encoding::pipeline::render_job`] on a blocking thread (the pipeline spreads its work over the
+//! rayon pool; tokio's worker threads never solve). Meanwhile the async side renews the lease (every third of
+//! it, and at least every 500 ms), writes progress, and forwards a cancel request to the solver's flag.
+//! The outputs exist in clear only in memory: each file, and the bundle's zip, is sealed under the job's data
+//! key into `<data>/jobs/.tmp-<job>-<attempt>/<name>.sealed`, and the directory is renamed to
+//! `<data>/jobs/<job>-<attempt>/` only when complete, so a bundle is never visible half-written. A worker
+//! whose success is refused (it lost the job, or the job was deleted meanwhile) removes its own output.
 //!
 //! Outcomes: success → `succeeded`; `PipelineError::Invalid` → `failed` at once (retrying cannot help);
 //! any other error or a panic → back to `queued` while attempts remain, else `failed`; a cancel request →
@@ -21,9 +23,11 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use tokio::task::JoinSet;
 
+use super::crypto::DataKey;
+use super::sealed;
 use super::state::AppState;
 use super::store::{self, jobs::JobRow, jobs::JobState};
-use eyekey_core::encoding::pipeline::{run_job, EncodeOptions, JobSpec, PipelineError};
+use eyekey_core::encoding::pipeline::{render_job, JobSpec, PipelineError};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::profile::VisionProfile;
 
@@ -139,8 +143,17 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
     state.publish(&job);
     let attempt = job.attempts;
     tracing::info!(job = %job.id, attempt, "job started");
-    let spec = match load_spec(state, &job).await {
-        Ok(spec) => spec,
+    let loaded = async {
+        let key = sealed::unwrap_key(
+            &state.master_key,
+            job.data_key.as_deref(),
+            &sealed::job_key_aad(&job.id.to_string()),
+        )
+        .map_err(|e| LoadError::Fatal(format!("the job's data key: {e}")))?;
+        Ok((load_spec(state, &job).await?, key))
+    };
+    let (spec, key) = match loaded.await {
+        Ok(loaded) => loaded,
         Err(LoadError::Fatal(msg)) => return end(state, &job, JobState::Failed, Some(&msg)).await,
         Err(LoadError::Transient(e)) => return retry_or_fail(state, &job, &format!("{e:#}")).await,
     };
@@ -151,9 +164,9 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         Some(false) => {}
     }
     let tmp = prepare_temp_dir(state, &job).await?;
-    let solver = spawn_solver(state, spec, &tmp);
+    let solver = spawn_solver(state, spec, key.clone(), &tmp, job.id.to_string());
     let finished = supervise(state, &job, solver).await;
-    finalise(state, &job, tmp, finished).await
+    finalise(state, &job, &key, tmp, finished).await
 }
 
 /// Creates this attempt's empty output directory, `<data>/jobs/.tmp-<job>-<attempt>/` (clearing one a
@@ -170,8 +183,9 @@ async fn prepare_temp_dir(state: &AppState, job: &JobRow) -> anyhow::Result<Path
     Ok(tmp)
 }
 
-/// Starts the pipeline on a blocking thread, writing into `tmp` and sealing the bundle when done.
-fn spawn_solver(state: &AppState, spec: JobSpec, tmp: &Path) -> Solver {
+/// Starts the pipeline on a blocking thread; its outputs and the bundle's zip are sealed under `key` into
+/// `tmp`.
+fn spawn_solver(state: &AppState, spec: JobSpec, key: DataKey, tmp: &Path, job_id: String) -> Solver {
     let cancel = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(AtomicU64::new(0f64.to_bits()));
     let started = Instant::now();
@@ -180,9 +194,10 @@ fn spawn_solver(state: &AppState, spec: JobSpec, tmp: &Path) -> Solver {
         let cache = state.transport_cache.clone();
         move || -> Result<Solved, PipelineError> {
             let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
-            let output = run_job(&spec, &tmp, &cache, &report, &cancel)?;
-            let files = bundle::seal_bundle(&tmp).map_err(|e| PipelineError::internal("writing the bundle", e))?;
-            let evaluation = serde_json::to_value(&output.evaluation)
+            let rendered = render_job(&spec, &cache, &report, &cancel)?;
+            let files = seal_outputs(&tmp, &key, &job_id, &rendered.files)
+                .map_err(|e| PipelineError::internal("storing the outputs", e))?;
+            let evaluation = serde_json::to_value(&rendered.evaluation)
                 .map_err(|e| PipelineError::internal("recording the evaluation", e))?;
             Ok(Solved { evaluation, files })
         }
@@ -193,6 +208,29 @@ fn spawn_solver(state: &AppState, spec: JobSpec, tmp: &Path) -> Solver {
         progress,
         started,
     }
+}
+
+/// Seals a job's outputs (relative path, bytes) and the zip of its bundle under `key` into `dir`, each as
+/// `<name>.sealed`; returns the bundle's file list.
+pub fn seal_outputs(
+    dir: &Path,
+    key: &DataKey,
+    job_id: &str,
+    outputs: &[(String, Vec<u8>)],
+) -> std::io::Result<Vec<bundle::BundleFile>> {
+    let (files, zipped) = bundle::zip_bundle(outputs)?;
+    let outputs = outputs.iter().map(|(n, b)| (n.as_str(), b.as_slice()));
+    for (name, plain) in outputs.chain([(bundle::ZIP_NAME, zipped.as_slice())]) {
+        if !name.split('/').all(bundle::is_plain_file_name) {
+            return Err(std::io::Error::other(format!("not a plain output name: {name}")));
+        }
+        let path = dir.join(format!("{name}{}", sealed::SUFFIX));
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)?;
+        }
+        sealed::seal_to_file(&path, key, &sealed::job_file_aad(job_id, name), plain)?;
+    }
+    Ok(files)
 }
 
 /// Waits for the solver while renewing the lease and recording progress, and asks it to stop on a
@@ -296,7 +334,13 @@ impl Outcome {
 }
 
 /// Records how the attempt ended. Every outcome but success discards the temporary output first.
-async fn finalise(state: &AppState, job: &JobRow, tmp: PathBuf, finished: Finished) -> anyhow::Result<()> {
+async fn finalise(
+    state: &AppState,
+    job: &JobRow,
+    key: &DataKey,
+    tmp: PathBuf,
+    finished: Finished,
+) -> anyhow::Result<()> {
     let outcome = Outcome::of(finished.outcome, finished.stop);
     if !matches!(outcome, Outcome::Succeeded(_)) {
         discard(&tmp).await;
@@ -304,7 +348,7 @@ async fn finalise(state: &AppState, job: &JobRow, tmp: PathBuf, finished: Finish
     let elapsed = finished.elapsed;
     match outcome {
         Outcome::Abandoned => Ok(()),
-        Outcome::Succeeded(solved) => finalise_success(state, job, &tmp, solved, elapsed).await,
+        Outcome::Succeeded(solved) => finalise_success(state, job, key, &tmp, solved, elapsed).await,
         Outcome::Interrupted => requeue_on_shutdown(state, job).await,
         Outcome::Cancelled => finalise_cancelled(state, job, elapsed).await,
         Outcome::Invalid(e) => end(state, job, JobState::Failed, Some(&e.to_string())).await,
@@ -320,24 +364,28 @@ async fn discard(dir: &Path) {
     }
 }
 
-/// Moves the output into `<data>/jobs/<job>/` and records the success, fenced by the attempt: a worker
-/// that lost the job meanwhile drops its result.
+/// Moves the output into `<data>/jobs/<job>-<attempt>/` and records the success, fenced by the attempt: a
+/// worker that lost the job meanwhile, or whose job was deleted, removes its output and records nothing.
 async fn finalise_success(
     state: &AppState,
     job: &JobRow,
+    key: &DataKey,
     tmp: &Path,
     solved: Solved,
     elapsed: Duration,
 ) -> anyhow::Result<()> {
-    let final_dir = state.data_dir().join("jobs").join(job.id.to_string());
+    let relative = format!("jobs/{}-{}", job.id, job.attempts);
+    let final_dir = state.data_dir().join(&relative);
     if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
-        // Left by an earlier attempt that renamed its output but died before recording it.
+        // Left by this same attempt in a run that renamed its output but died before recording it.
         tokio::fs::remove_dir_all(&final_dir).await?;
     }
     tokio::fs::rename(tmp, &final_dir).await?;
     let success = store::jobs::Success {
-        evaluation_summary: summarise(&solved.evaluation),
-        bundle_path: format!("jobs/{}", job.id),
+        sealed_summary: summarise(&solved.evaluation)
+            .map(|text| key.seal(text.as_bytes(), &sealed::job_summary_aad(&job.id.to_string())))
+            .transpose()?,
+        bundle_path: relative,
         bundle_files: serde_json::to_string(&solved.files)?,
         solve_ms: elapsed.as_millis() as i64,
     };
@@ -347,7 +395,10 @@ async fn finalise_success(
         tracing::info!(job = %job.id, attempt = job.attempts, seconds = elapsed.as_secs_f64(), "job succeeded");
         publish_current(state, job.id).await;
     } else {
-        tracing::warn!(job = %job.id, attempt = job.attempts, "finished after losing the job; result dropped");
+        tracing::warn!(job = %job.id, attempt = job.attempts, "finished after losing the job, or after it was deleted; result dropped");
+        discard(&final_dir).await;
+        // A deleted job that was running ends as cancelled (it stays a tombstone).
+        end(state, job, JobState::Cancelled, None).await?;
     }
     Ok(())
 }
@@ -450,11 +501,13 @@ async fn open_profile(state: &AppState, id: &str, version: i64, role: &str) -> R
 async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::RgbImage, LoadError> {
     let doc = store::documents::get(&state.db, id)
         .await?
-        .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} does not exist")))?;
-    let path = state.data_dir().join(&doc.path);
-    let bytes = tokio::fs::read(&path)
+        .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} was deleted")))?;
+    let bytes = super::routes::documents::open_document(state, &doc)
         .await
-        .map_err(|e| LoadError::Transient(anyhow::anyhow!("reading {}: {e}", path.display())))?;
+        .map_err(|e| match e {
+            sealed::OpenError::Io(e) => LoadError::Transient(anyhow::anyhow!("reading the {role} document: {e}")),
+            other => LoadError::Fatal(format!("the {role} document {id}: {other}")),
+        })?;
     let max_pixels = state.config.limits.max_document_pixels;
     let role = role.to_string();
     tokio::task::spawn_blocking(move || {
@@ -476,8 +529,8 @@ async fn load_spec(state: &AppState, job: &JobRow) -> Result<JobSpec, LoadError>
         .ok_or_else(|| LoadError::Fatal(format!("the display {} was deleted", job.display_id)))?;
     let geometry: DisplayGeometry = serde_json::from_str(&display.geometry)
         .map_err(|e| LoadError::Fatal(format!("stored display geometry: {e}")))?;
-    let options: EncodeOptions =
-        serde_json::from_str(&job.options).map_err(|e| LoadError::Fatal(format!("stored options: {e}")))?;
+    let options =
+        sealed::job_options(&state.master_key, job).map_err(|e| LoadError::Fatal(format!("stored options: {e:#}")))?;
     let observer_refs: Vec<ObserverRef> =
         serde_json::from_str(&job.observers).map_err(|e| LoadError::Fatal(format!("stored observers: {e}")))?;
     let target = open_profile(state, &job.profile_id, job.profile_version, "target").await?;

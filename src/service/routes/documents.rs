@@ -3,7 +3,9 @@
 //! Upload is the raw image as the request body with `Content-Type: image/png` or `image/jpeg` (no
 //! multipart). The header is checked and the pixel count limited before any pixel is decoded; the file
 //! is then fully decoded under memory limits, so truncated files, wrong types and decompression bombs
-//! are refused at upload rather than when a job runs.
+//! are refused at upload rather than when a job runs. The bytes are stored sealed under a data key of the
+//! document's own ([`crate::service::sealed`]); deleting the document destroys that key, removes the file
+//! and deletes every job that showed it.
 
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
@@ -13,13 +15,14 @@ use axum::routing::get;
 use axum::{Json, Router};
 use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
 use crate::service::auth::{Operator, OPERATOR};
+use crate::service::crypto::DataKey;
 use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
 use crate::service::images::{self, ImageProblem};
+use crate::service::sealed;
 use crate::service::state::AppState;
 use crate::service::store::{self, documents::DocumentRow, to_time};
 
@@ -32,7 +35,7 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
                 .post(upload_document)
                 .layer(DefaultBodyLimit::max(max_document_bytes)),
         )
-        .route("/v1/documents/{id}", get(get_document))
+        .route("/v1/documents/{id}", get(get_document).delete(delete_document))
 }
 
 /// An uploaded document's metadata.
@@ -40,8 +43,10 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
 pub struct DocumentView {
     /// Id.
     pub id: Uuid,
-    /// SHA-256 of the uploaded bytes, hex.
-    pub sha256: String,
+    /// HMAC-SHA256 of the uploaded bytes under a key only this service holds, hex: equal uploads have equal
+    /// values, and nobody without the service's master key can tell what was uploaded from it (a plain
+    /// hash of a PIN slip would give the PIN away).
+    pub content_mac: String,
     /// `image/png` or `image/jpeg`.
     pub content_type: String,
     /// Size of the upload, bytes.
@@ -67,7 +72,7 @@ impl From<&DocumentRow> for DocumentView {
     fn from(r: &DocumentRow) -> Self {
         Self {
             id: r.id.parse().unwrap_or_default(),
-            sha256: r.sha256.clone(),
+            content_mac: r.content_mac.clone(),
             content_type: r.content_type.clone(),
             bytes: r.bytes,
             width: r.width,
@@ -75,6 +80,24 @@ impl From<&DocumentRow> for DocumentView {
             created_at: to_time(r.created_at),
         }
     }
+}
+
+/// The purpose under which upload digests are keyed ([`crate::service::crypto::MasterKey::digest`]).
+pub const DOCUMENT_MAC: &str = "document-content";
+
+fn internal(e: impl Into<anyhow::Error>) -> ApiError {
+    ApiError::Internal(e.into())
+}
+
+/// A document's bytes, opened from its sealed file.
+pub async fn open_document(state: &AppState, doc: &DocumentRow) -> Result<Vec<u8>, sealed::OpenError> {
+    let key = sealed::unwrap_key(
+        &state.master_key,
+        doc.data_key.as_deref(),
+        &sealed::document_key_aad(&doc.id),
+    )
+    .map_err(|_| sealed::OpenError::Open)?;
+    sealed::open_file(&state.data_dir().join(&doc.path), &key, &sealed::document_aad(&doc.id)).await
 }
 
 fn problem(p: ImageProblem) -> ApiError {
@@ -143,26 +166,30 @@ pub async fn upload_document(
     .map_err(problem)?;
 
     let id = id_text(&Uuid::new_v4());
-    let sha256 = hex::encode(Sha256::digest(&bytes));
-    let relative = format!("documents/{id}.{}", header.extension());
+    let content_mac = state.master_key.digest(DOCUMENT_MAC, &bytes);
+    let key = DataKey::generate();
+    let wrapped = key
+        .wrap(&state.master_key, &sealed::document_key_aad(&id))
+        .map_err(internal)?;
+    let relative = format!("documents/{id}{}", sealed::SUFFIX);
     let path = state.data_dir().join(&relative);
-    let part = state.data_dir().join(format!("documents/.{id}.part"));
-    tokio::fs::write(&part, &bytes)
+    let aad = sealed::document_aad(&id);
+    let len = bytes.len() as i64;
+    tokio::task::spawn_blocking(move || sealed::seal_to_file(&path, &key, &aad, &bytes))
         .await
-        .map_err(|e| ApiError::Internal(e.into()))?;
-    tokio::fs::rename(&part, &path)
-        .await
-        .map_err(|e| ApiError::Internal(e.into()))?;
+        .map_err(internal)?
+        .map_err(ApiError::from_io)?;
     let row = store::documents::insert(
         &state.writer,
         &store::documents::NewDocument {
             id: &id,
-            sha256: &sha256,
+            content_mac: &content_mac,
             content_type: header.content_type(),
-            bytes: bytes.len() as i64,
+            bytes: len,
             width: header.width.into(),
             height: header.height.into(),
             path: &relative,
+            data_key: &wrapped,
         },
     )
     .await?;
@@ -213,4 +240,36 @@ pub async fn list_documents(
         next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.clone())),
         items: rows.iter().map(DocumentView::from).collect(),
     }))
+}
+
+/// Delete a document, and everything that showed it.
+///
+/// The document's data key is destroyed and its sealed file removed; every job that showed it (as the
+/// document or the decoy) is deleted with its evaluation and bundle: queued ones are cancelled, running ones
+/// stopped. The database's log is checkpointed, so no copy of the key survives in it.
+#[utoipa::path(
+    delete, path = "/v1/documents/{id}", tag = "documents",
+    params(("id" = Uuid, Path, description = "Document id")),
+    responses(
+        (status = 204, description = "Deleted, with the jobs that showed it"),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such document", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn delete_document(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<StatusCode, ApiError> {
+    let id = id_text(&id);
+    let left = store::documents::delete(&state.writer, store::documents::Which::One(&id), store::now_ms())
+        .await?
+        .ok_or(ApiError::NotFound("document"))?;
+    store::audit::record(&state.writer, OPERATOR, "document.delete", &format!("documents/{id}")).await?;
+    for job in &left.jobs {
+        store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{job}")).await?;
+    }
+    crate::service::retention::finish_deletion(&state, &left.paths).await;
+    Ok(StatusCode::NO_CONTENT)
 }

@@ -8,13 +8,14 @@ use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
-use super::stream_file;
+use super::send_sealed;
 use crate::service::auth::Operator;
 use crate::service::error::{ApiError, ApiPath, ErrorBody};
 use crate::service::jobs::bundle::is_plain_file_name;
+use crate::service::sealed;
 use crate::service::state::AppState;
 use crate::service::store::ids::JobId;
-use crate::service::store::{self, jobs::JobState};
+use crate::service::store::{self, jobs::JobRow, jobs::JobState};
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {
@@ -31,12 +32,13 @@ pub struct ViewList {
     pub names: Vec<String>,
 }
 
-async fn output_dir(state: &AppState, id: &Uuid) -> Result<std::path::PathBuf, ApiError> {
+/// The job, once it has succeeded (its outputs exist then).
+async fn succeeded(state: &AppState, id: &Uuid) -> Result<JobRow, ApiError> {
     let job = store::jobs::get(&state.db, JobId::from(*id))
         .await?
         .ok_or(ApiError::NotFound("job"))?;
     match (job.state, &job.bundle_path) {
-        (JobState::Succeeded, Some(path)) => Ok(state.data_dir().join(path)),
+        (JobState::Succeeded, Some(_)) => Ok(job),
         (s, _) => Err(ApiError::Conflict {
             code: "job_not_succeeded",
             message: format!("the job is {}; its evaluation exists once it has succeeded", s.as_str()),
@@ -61,8 +63,16 @@ pub async fn get_evaluation(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
-    let dir = output_dir(&state, &id).await?;
-    stream_file(&dir.join("report.json"), "application/json", None, "evaluation report").await
+    let job = succeeded(&state, &id).await?;
+    send_sealed(
+        &state,
+        &job,
+        "report.json",
+        "application/json",
+        None,
+        "evaluation report",
+    )
+    .await
 }
 
 /// Names of the job's simulated views (PNG).
@@ -82,13 +92,19 @@ pub async fn list_views(
     _: Operator,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<ViewList>, ApiError> {
-    let dir = output_dir(&state, &id).await?.join("views");
+    let job = succeeded(&state, &id).await?;
+    let dir = state
+        .data_dir()
+        .join(job.bundle_path.as_deref().unwrap_or_default())
+        .join("views");
     let mut names = Vec::new();
     if let Ok(mut entries) = tokio::fs::read_dir(&dir).await {
         while let Ok(Some(e)) = entries.next_entry().await {
             if let Ok(name) = e.file_name().into_string() {
-                if name.ends_with(".png") && is_plain_file_name(&name) {
-                    names.push(name);
+                if let Some(name) = name.strip_suffix(sealed::SUFFIX) {
+                    if name.ends_with(".png") && is_plain_file_name(name) {
+                        names.push(name.to_string());
+                    }
                 }
             }
         }
@@ -117,6 +133,6 @@ pub async fn get_view(
     if !is_plain_file_name(&name) || !name.ends_with(".png") {
         return Err(ApiError::NotFound("view"));
     }
-    let dir = output_dir(&state, &id).await?;
-    stream_file(&dir.join("views").join(&name), "image/png", None, "view").await
+    let job = succeeded(&state, &id).await?;
+    send_sealed(&state, &job, &format!("views/{name}"), "image/png", None, "view").await
 }

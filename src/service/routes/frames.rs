@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
-use super::{content_type_of, next_cursor, stream_file, PageQuery};
+use super::{content_type_of, next_cursor, send_sealed, PageQuery};
 use crate::service::auth::DisplayClient;
 use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::{is_bundle_file, BundleFile, ZIP_NAME};
@@ -141,14 +141,8 @@ pub async fn download_bundle(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
     let job = own_job(&state, &client, &id).await?;
-    let dir = state.data_dir().join(job.bundle_path.as_deref().unwrap_or_default());
-    let response = stream_file(
-        &dir.join(ZIP_NAME),
-        "application/zip",
-        Some(&format!("eyekey-{}.zip", job.id)),
-        "bundle",
-    )
-    .await?;
+    let download = format!("eyekey-{}.zip", job.id);
+    let response = send_sealed(&state, &job, ZIP_NAME, "application/zip", Some(&download), "bundle").await?;
     store::audit::record(
         &state.writer,
         &client.actor(),
@@ -180,8 +174,7 @@ pub async fn download_file(
         return Err(ApiError::NotFound("bundle file"));
     }
     let job = own_job(&state, &client, &id).await?;
-    let dir = state.data_dir().join(job.bundle_path.as_deref().unwrap_or_default());
-    let response = stream_file(&dir.join(&name), content_type_of(&name), None, "bundle file").await?;
+    let response = send_sealed(&state, &job, &name, content_type_of(&name), None, "bundle file").await?;
     store::audit::record(
         &state.writer,
         &client.actor(),

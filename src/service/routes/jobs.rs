@@ -1,4 +1,7 @@
-//! `/v1/jobs`: encoding jobs (operator only): create (idempotent), read, list, cancel, follow.
+//! `/v1/jobs`: encoding jobs (operator only): create (idempotent), read, list, cancel, delete, follow.
+//!
+//! A job gets a data key of its own at creation; its outputs, and the options that carry the document (its
+//! text hint), are sealed under it.
 
 use std::convert::Infallible;
 use std::time::Duration;
@@ -12,16 +15,17 @@ use axum::{Json, Router};
 use chrono::{DateTime, Utc};
 use futures::Stream;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 use tokio::sync::broadcast::error::RecvError;
 use uuid::Uuid;
 
 use super::displays::{resolvability_warnings, stored_geometry};
 use super::{id_text, next_cursor, PageQuery};
 use crate::service::auth::{Operator, OPERATOR};
+use crate::service::crypto::{DataKey, MasterKey};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::BundleFile;
 use crate::service::jobs::ObserverRef;
+use crate::service::sealed;
 use crate::service::state::{AppState, JobEvent};
 use crate::service::store::ids::JobId;
 use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
@@ -33,7 +37,7 @@ use eyekey_core::physics::resolvability::Resolvability;
 pub fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/jobs", get(list_jobs).post(create_job))
-        .route("/v1/jobs/{id}", get(get_job))
+        .route("/v1/jobs/{id}", get(get_job).delete(delete_job))
         .route("/v1/jobs/{id}/cancel", post(cancel_job))
         .route("/v1/jobs/{id}/events", get(job_events))
 }
@@ -147,10 +151,10 @@ fn parse_id(s: &str) -> Uuid {
 }
 
 impl JobView {
-    /// The view of a stored job, with its display's `warnings`.
-    fn new(r: &JobRow, warnings: Vec<String>) -> Result<Self, ApiError> {
+    /// The view of a stored job, with its display's `warnings` (its sealed options opened with `master`).
+    fn new(master: &MasterKey, r: &JobRow, warnings: Vec<String>) -> Result<Self, ApiError> {
         let internal = |what: &str, e: serde_json::Error| ApiError::Internal(anyhow::anyhow!("stored {what}: {e}"));
-        let options: EncodeOptions = serde_json::from_str(&r.options).map_err(|e| internal("options", e))?;
+        let options = sealed::job_options(master, r).map_err(|e| e.context("stored options"))?;
         Ok(Self {
             id: r.id.as_uuid(),
             state: r.state,
@@ -167,10 +171,7 @@ impl JobView {
             method: options.method,
             options,
             last_error: r.last_error.clone(),
-            evaluation_summary: r
-                .evaluation_summary
-                .as_deref()
-                .and_then(|s| serde_json::from_str(s).ok()),
+            evaluation_summary: sealed::job_summary(master, r).map_err(|e| e.context("stored summary"))?,
             bundle_files: r.bundle_files.as_deref().and_then(|s| serde_json::from_str(s).ok()),
             timings: JobTimings {
                 created_at: to_time(r.created_at),
@@ -264,16 +265,27 @@ pub async fn create_job(
     headers: HeaderMap,
     ApiJson(body): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
-    let key = idempotency_key(&headers)?;
+    let idempotency_key = idempotency_key(&headers)?;
     let options = body.options.clone().unwrap_or_default();
     check_options(&options)?;
     if body.observer_profile_ids.len() > 16 {
         return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
-    let request_hash = request_hash(&body, &options)?;
+    let request_hash = request_hash(&state.master_key, &body, &options)?;
     let (warnings, target, observers) = resolve_inputs(&state.db, &body).await?;
+    let id = JobId::new_v4();
+    let key = DataKey::generate();
+    let internal = |e: crate::service::crypto::CryptoError| ApiError::Internal(e.into());
+    let data_key = key
+        .wrap(&state.master_key, &sealed::job_key_aad(&id.to_string()))
+        .map_err(internal)?;
+    let (clear_options, secret) = sealed::split_options(&options).map_err(|e| ApiError::Internal(e.into()))?;
+    let sealed_options = secret
+        .map(|s| key.seal(&s, &sealed::job_options_aad(&id.to_string())))
+        .transpose()
+        .map_err(internal)?;
     let new = NewJob {
-        id: JobId::new_v4(),
+        id,
         display_id: id_text(&body.display_id),
         document_id: id_text(&body.document_id),
         decoy_document_id: body.decoy_document_id.as_ref().map(id_text),
@@ -281,29 +293,30 @@ pub async fn create_job(
         profile_version: target.current_version,
         observers: to_json(&observers)?,
         method: to_json(&options.method)?.trim_matches('"').to_string(),
-        options: to_json(&options)?,
+        options: clear_options,
         max_attempts: state.config.queue.max_attempts.into(),
-        idempotency_key: key,
+        idempotency_key,
         request_hash,
+        data_key,
+        sealed_options,
     };
     let (status, row) = enqueue(&state, &new).await?;
-    let mut response = (status, Json(JobView::new(&row, warnings)?)).into_response();
+    let mut response = (status, Json(JobView::new(&state.master_key, &row, warnings)?)).into_response();
     if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
         response.headers_mut().insert(header::LOCATION, location);
     }
     Ok(response)
 }
 
-/// The hash of the canonical request (options filled in), which identifies "the same request" for
-/// idempotency.
-fn request_hash(body: &CreateJob, options: &EncodeOptions) -> Result<String, ApiError> {
+/// The keyed digest of the canonical request (options filled in), which identifies "the same request" for
+/// idempotency. Keyed, because the request may carry the document's text.
+fn request_hash(master: &MasterKey, body: &CreateJob, options: &EncodeOptions) -> Result<String, ApiError> {
     let canonical = CreateJob {
         options: Some(options.clone()),
         ..body.clone()
     };
-    Ok(hex::encode(Sha256::digest(
-        serde_json::to_vec(&canonical).map_err(|e| ApiError::Internal(e.into()))?,
-    )))
+    let bytes = serde_json::to_vec(&canonical).map_err(|e| ApiError::Internal(e.into()))?;
+    Ok(master.digest("job-request", &bytes))
 }
 
 /// Checks that every input of a job creation exists; returns the display's warnings, the target profile
@@ -390,7 +403,7 @@ pub async fn get_job(
 ) -> Result<Json<JobView>, ApiError> {
     let row = load(&state, &id).await?;
     let warnings = display_warnings(&state, &row.display_id).await?;
-    Ok(Json(JobView::new(&row, warnings)?))
+    Ok(Json(JobView::new(&state.master_key, &row, warnings)?))
 }
 
 /// List jobs, newest first, optionally by state and display.
@@ -421,7 +434,11 @@ pub async fn list_jobs(
     let rows = store::jobs::list(&state.db, &filter, limit, cursor.as_ref()).await?;
     let mut items = Vec::with_capacity(rows.len());
     for row in &rows {
-        items.push(JobView::new(row, display_warnings(&state, &row.display_id).await?)?);
+        items.push(JobView::new(
+            &state.master_key,
+            row,
+            display_warnings(&state, &row.display_id).await?,
+        )?);
     }
     Ok(Json(JobList {
         next_cursor: next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string())),
@@ -467,7 +484,41 @@ pub async fn cancel_job(
     store::audit::record(&state.writer, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
     let warnings = display_warnings(&state, &row.display_id).await?;
-    Ok((status, Json(JobView::new(&row, warnings)?)))
+    Ok((status, Json(JobView::new(&state.master_key, &row, warnings)?)))
+}
+
+/// Delete a job and what it produced.
+///
+/// Its data key is destroyed and its evaluation, views and bundle removed; a queued job is cancelled, a
+/// running one stopped (it ends `cancelled`, its output dropped). Its display can no longer fetch its frames.
+/// The job stays as a tombstone in the audit log; reading it is a 404.
+#[utoipa::path(
+    delete, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+    ),
+    security(("operator" = []))
+)]
+pub async fn delete_job(
+    State(state): State<AppState>,
+    _: Operator,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<StatusCode, ApiError> {
+    let row = load(&state, &id).await?;
+    let mut tx = state.writer.0.begin().await?;
+    let purged = store::jobs::purge(&mut tx, store::jobs::JobSet::One(row.id), "deleted", store::now_ms()).await?;
+    tx.commit().await?;
+    if purged.jobs.is_empty() {
+        return Err(ApiError::NotFound("job"));
+    }
+    store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{id}")).await?;
+    // Wakes the job's event streams, which then find it gone and end.
+    state.publish(&row);
+    crate::service::retention::finish_deletion(&state, &purged.paths).await;
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// Follow a job: server-sent events.
@@ -546,7 +597,7 @@ impl Follow {
                 };
                 self.last = Some(key);
                 self.done = row.state.is_terminal();
-                let view = JobView::new(&row, self.warnings.clone()).ok()?;
+                let view = JobView::new(&self.state.master_key, &row, self.warnings.clone()).ok()?;
                 return Some(Event::default().event(kind).data(serde_json::to_string(&view).ok()?));
             }
             if !self.wait().await {

@@ -10,18 +10,17 @@ pub mod jobs;
 pub mod metrics;
 pub mod profiles;
 
-use std::path::Path;
-
 use axum::body::Body;
 use axum::http::{header, HeaderValue};
 use axum::response::Response;
 use axum::Router;
 use serde::Deserialize;
-use tokio_util::io::ReaderStream;
 use uuid::Uuid;
 
 use super::error::ApiError;
+use super::sealed;
 use super::state::AppState;
+use super::store::jobs::JobRow;
 use super::store::{Cursor, DEFAULT_PAGE, MAX_PAGE};
 
 /// Every route of the service (without the documentation UI and middleware).
@@ -84,20 +83,31 @@ pub fn id_text(id: &Uuid) -> String {
     id.hyphenated().to_string()
 }
 
-/// Streams a file as the response body; a missing file is a 404 of `what`.
-pub async fn stream_file(
-    path: &Path,
+/// One of a job's sealed outputs (`name` relative to its output directory), opened and sent whole; a
+/// missing file is a 404 of `what`.
+pub async fn send_sealed(
+    state: &AppState,
+    job: &JobRow,
+    name: &str,
     content_type: &'static str,
     download_name: Option<&str>,
     what: &'static str,
 ) -> Result<Response, ApiError> {
-    let file = match tokio::fs::File::open(path).await {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ApiError::NotFound(what)),
-        Err(e) => return Err(ApiError::Internal(e.into())),
+    let Some(dir) = &job.bundle_path else {
+        return Err(ApiError::NotFound(what));
     };
-    let len = file.metadata().await.map_err(|e| ApiError::Internal(e.into()))?.len();
-    let mut response = Response::new(Body::from_stream(ReaderStream::with_capacity(file, 64 * 1024)));
+    let id = job.id.to_string();
+    let key = sealed::unwrap_key(&state.master_key, job.data_key.as_deref(), &sealed::job_key_aad(&id))
+        .map_err(|_| ApiError::NotFound(what))?;
+    let path = state.data_dir().join(dir).join(format!("{name}{}", sealed::SUFFIX));
+    let plain = match sealed::open_file(&path, &key, &sealed::job_file_aad(&id, name)).await {
+        Ok(p) => p,
+        Err(sealed::OpenError::Missing) => return Err(ApiError::NotFound(what)),
+        Err(sealed::OpenError::Io(e)) => return Err(ApiError::from_io(e)),
+        Err(e @ sealed::OpenError::Open) => return Err(ApiError::Internal(anyhow::anyhow!("{}: {e}", path.display()))),
+    };
+    let len = plain.len();
+    let mut response = Response::new(Body::from(plain));
     let headers = response.headers_mut();
     headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     headers.insert(header::CONTENT_LENGTH, HeaderValue::from(len));

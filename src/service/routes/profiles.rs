@@ -244,8 +244,10 @@ pub async fn reenrol_profile(
 
 /// Delete a profile.
 ///
-/// Every sealed version is erased (the database overwrites freed pages); a tombstone keeps the id so
-/// jobs still name the profile they used. Queued jobs targeting it are cancelled, running ones stopped.
+/// Every sealed version is erased (the database overwrites freed pages and its log is checkpointed); a
+/// tombstone keeps the id for the audit log. Everything derived from the profile goes too: every job it
+/// was the target or an observer of is deleted with its evaluation and bundle (queued ones cancelled,
+/// running ones stopped).
 #[utoipa::path(
     delete, path = "/v1/profiles/{id}", tag = "profiles",
     params(("id" = Uuid, Path, description = "Profile id")),
@@ -262,9 +264,13 @@ pub async fn delete_profile(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
-    if !store::profiles::delete(&state.writer, &id).await? {
-        return Err(ApiError::NotFound("profile"));
-    }
+    let purged = store::profiles::delete(&state.writer, &id)
+        .await?
+        .ok_or(ApiError::NotFound("profile"))?;
     store::audit::record(&state.writer, OPERATOR, "profile.delete", &format!("profiles/{id}")).await?;
+    for job in &purged.jobs {
+        store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{job}")).await?;
+    }
+    crate::service::retention::finish_deletion(&state, &purged.paths).await;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -110,14 +110,7 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
         .rows_affected()
         == 1;
     if done {
-        super::jobs::stop_jobs_of(
-            &mut tx,
-            super::jobs::JobOwner::Display,
-            id,
-            "the display was deleted",
-            now,
-        )
-        .await?;
+        super::jobs::stop_jobs_of_display(&mut tx, id, "the display was deleted", now).await?;
     }
     tx.commit().await?;
     Ok(done)

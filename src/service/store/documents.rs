@@ -1,4 +1,4 @@
-//! Uploaded documents (metadata; the bytes are files under the data directory).
+//! Uploaded documents: metadata and wrapped data keys (the sealed bytes are files under the data directory).
 
 use sqlx::SqlitePool;
 
@@ -9,8 +9,8 @@ use super::{now_ms, Cursor, Writer};
 pub struct DocumentRow {
     /// Id.
     pub id: String,
-    /// SHA-256 of the uploaded bytes, hex.
-    pub sha256: String,
+    /// Keyed HMAC-SHA256 of the uploaded bytes, hex (see [`crate::service::crypto::MasterKey::digest`]).
+    pub content_mac: String,
     /// `image/png` or `image/jpeg`.
     pub content_type: String,
     /// Size of the upload.
@@ -19,21 +19,24 @@ pub struct DocumentRow {
     pub width: i64,
     /// Height in pixels.
     pub height: i64,
-    /// Path of the stored file relative to the data directory.
+    /// Path of the stored (sealed) file relative to the data directory.
     pub path: String,
+    /// The data key the file is sealed under, wrapped by the master key; `None` for a document stored
+    /// before sealing (sealed at start) or deleted.
+    pub data_key: Option<Vec<u8>>,
     /// Upload time.
     pub created_at: i64,
 }
 
-const COLUMNS: &str = "id, sha256, content_type, bytes, width, height, path, created_at";
+const COLUMNS: &str = "id, content_mac, content_type, bytes, width, height, path, data_key, created_at";
 
 /// A new document's metadata.
 #[derive(Clone, Debug)]
 pub struct NewDocument<'a> {
     /// Id.
     pub id: &'a str,
-    /// SHA-256, hex.
-    pub sha256: &'a str,
+    /// Keyed MAC, hex.
+    pub content_mac: &'a str,
     /// Content type.
     pub content_type: &'a str,
     /// Size.
@@ -44,36 +47,131 @@ pub struct NewDocument<'a> {
     pub height: i64,
     /// Relative path.
     pub path: &'a str,
+    /// Wrapped data key.
+    pub data_key: &'a [u8],
 }
 
-/// Records an uploaded document whose file is already in place.
+/// Records an uploaded document whose sealed file is already in place.
 pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow, sqlx::Error> {
     let pool = &writer.0;
     sqlx::query_as::<_, DocumentRow>(&format!(
-        "INSERT INTO documents (id, sha256, content_type, bytes, width, height, path, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+        "INSERT INTO documents (id, content_mac, content_type, bytes, width, height, path, data_key, created_at)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
     ))
     .bind(d.id)
-    .bind(d.sha256)
+    .bind(d.content_mac)
     .bind(d.content_type)
     .bind(d.bytes)
     .bind(d.width)
     .bind(d.height)
     .bind(d.path)
+    .bind(d.data_key)
     .bind(now_ms())
     .fetch_one(pool)
     .await
 }
 
-/// One document.
+/// One live (not deleted) document.
 pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DocumentRow>, sqlx::Error> {
-    sqlx::query_as::<_, DocumentRow>(&format!("SELECT {COLUMNS} FROM documents WHERE id = ?"))
-        .bind(id)
-        .fetch_optional(pool)
-        .await
+    sqlx::query_as::<_, DocumentRow>(&format!(
+        "SELECT {COLUMNS} FROM documents WHERE id = ? AND deleted_at IS NULL"
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
 }
 
-/// Documents, newest first.
+/// Live documents, newest first.
 pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DocumentRow>, sqlx::Error> {
-    super::list_page(pool, "documents", COLUMNS, false, limit, cursor).await
+    super::list_page(pool, "documents", COLUMNS, true, limit, cursor).await
+}
+
+/// Live documents stored before sealing (no data key yet).
+pub async fn unsealed(pool: &SqlitePool) -> Result<Vec<DocumentRow>, sqlx::Error> {
+    sqlx::query_as::<_, DocumentRow>(&format!(
+        "SELECT {COLUMNS} FROM documents WHERE data_key IS NULL AND deleted_at IS NULL"
+    ))
+    .fetch_all(pool)
+    .await
+}
+
+/// Records that a document stored before sealing is now sealed at `path` under `data_key`.
+pub async fn set_sealed(
+    writer: &Writer,
+    id: &str,
+    path: &str,
+    content_mac: &str,
+    data_key: &[u8],
+) -> Result<(), sqlx::Error> {
+    sqlx::query("UPDATE documents SET path = ?, content_mac = ?, data_key = ? WHERE id = ? AND deleted_at IS NULL")
+        .bind(path)
+        .bind(content_mac)
+        .bind(data_key)
+        .bind(id)
+        .execute(&writer.0)
+        .await?;
+    Ok(())
+}
+
+/// What a deletion left to remove from the disk: files and directories relative to the data directory.
+/// Their data keys are already gone, so what remains cannot be opened even if removing it fails.
+#[derive(Clone, Debug, Default)]
+pub struct Leftovers {
+    /// Sealed files and job output directories.
+    pub paths: Vec<String>,
+    /// Jobs that were deleted.
+    pub jobs: Vec<String>,
+    /// Documents that were deleted.
+    pub documents: usize,
+}
+
+/// Deletes documents (one by id, or every one created before a time): the row stays as a tombstone
+/// without its data key, and every job that showed it is deleted too ([`super::jobs::purge`]). Returns
+/// what to remove from the disk, `None` when `id` named no live document.
+pub async fn delete(writer: &Writer, which: Which<'_>, now: i64) -> Result<Option<Leftovers>, sqlx::Error> {
+    let mut tx = writer.0.begin().await?;
+    let (id, before) = match which {
+        Which::One(id) => (Some(id), None),
+        Which::CreatedBefore(t) => (None, Some(t)),
+    };
+    // A NULL on either side makes its comparison false, so exactly one of the two selects.
+    let doomed: Vec<(String, String)> =
+        sqlx::query_as("SELECT id, path FROM documents WHERE deleted_at IS NULL AND (id = ?1 OR created_at < ?2)")
+            .bind(id)
+            .bind(before)
+            .fetch_all(&mut *tx)
+            .await?;
+    if doomed.is_empty() && matches!(which, Which::One(_)) {
+        return Ok(None);
+    }
+    let mut left = Leftovers::default();
+    for (id, path) in doomed {
+        sqlx::query("UPDATE documents SET deleted_at = ?, data_key = NULL WHERE id = ?")
+            .bind(now)
+            .bind(&id)
+            .execute(&mut *tx)
+            .await?;
+        let jobs = super::jobs::purge(
+            &mut tx,
+            super::jobs::JobSet::OfDocument(&id),
+            "the document was deleted",
+            now,
+        )
+        .await?;
+        left.paths.push(path);
+        left.documents += 1;
+        left.paths.extend(jobs.paths);
+        left.jobs.extend(jobs.jobs);
+    }
+    tx.commit().await?;
+    Ok(Some(left))
+}
+
+/// Which documents a deletion takes.
+#[derive(Clone, Copy, Debug)]
+pub enum Which<'a> {
+    /// This one.
+    One(&'a str),
+    /// Every one created before this time (Unix ms): expiry.
+    CreatedBefore(i64),
 }

@@ -62,46 +62,29 @@ impl JobState {
     }
 }
 
-/// Which reference a deleted resource is held by in the jobs table.
-#[derive(Clone, Copy, Debug)]
-pub enum JobOwner {
-    /// `jobs.display_id`.
-    Display,
-    /// `jobs.profile_id` (the target profile).
-    Profile,
-}
-
-/// Inside the deleting transaction: cancels the queued jobs that reference a deleted display or profile
-/// (with `reason` as their last error) and asks the running ones to stop.
-pub async fn stop_jobs_of(
+/// Inside the deleting transaction: cancels the queued jobs of a deleted display (with `reason` as their
+/// last error) and asks the running ones to stop. Its finished jobs stay: they are the operator's record.
+pub async fn stop_jobs_of_display(
     tx: &mut sqlx::SqliteConnection,
-    owner: JobOwner,
     id: &str,
     reason: &str,
     now: i64,
 ) -> Result<(), sqlx::Error> {
-    // The column name comes from this enum, never from input.
-    let column = match owner {
-        JobOwner::Display => "display_id",
-        JobOwner::Profile => "profile_id",
-    };
-    sqlx::query(&format!(
+    sqlx::query(
         "UPDATE jobs SET state = 'cancelled', last_error = ?, finished_at = ?, updated_at = ?
-         WHERE {column} = ? AND state = 'queued'"
-    ))
+         WHERE display_id = ? AND state = 'queued'",
+    )
     .bind(reason)
     .bind(now)
     .bind(now)
     .bind(id)
     .execute(&mut *tx)
     .await?;
-    sqlx::query(&format!(
-        "UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE {column} = ? AND state = 'running'"
-    ))
-    .bind(now)
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
+    sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE display_id = ? AND state = 'running'")
+        .bind(now)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
     Ok(())
 }
 
@@ -148,8 +131,10 @@ pub struct JobRow {
     pub idempotency_key: Option<String>,
     /// SHA-256 of the canonical request, for idempotency checks.
     pub request_hash: String,
-    /// Evaluation summary JSON.
+    /// Evaluation summary JSON of a job stored before summaries were sealed (until it is sealed at start).
     pub evaluation_summary: Option<String>,
+    /// Evaluation summary JSON, sealed under the job's data key.
+    pub sealed_summary: Option<Vec<u8>>,
     /// Output directory relative to the data directory.
     pub bundle_path: Option<String>,
     /// JSON list of the bundle files a display may fetch.
@@ -164,12 +149,17 @@ pub struct JobRow {
     pub solve_ms: Option<i64>,
     /// Last change.
     pub updated_at: i64,
+    /// The data key its outputs and sealed options are sealed under, wrapped by the master key; `None` for a
+    /// job stored before sealing (sealed at start) or deleted.
+    pub data_key: Option<Vec<u8>>,
+    /// The options that carry the document (its text hint), sealed under the job's data key.
+    pub sealed_options: Option<Vec<u8>>,
 }
 
 const COLUMNS: &str = "id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers, \
      method, options, state, progress, attempts, max_attempts, lease_until, heartbeat_at, worker_id, last_error, \
-     cancel_requested, idempotency_key, request_hash, evaluation_summary, bundle_path, bundle_files, created_at, \
-     started_at, finished_at, solve_ms, updated_at";
+     cancel_requested, idempotency_key, request_hash, evaluation_summary, sealed_summary, bundle_path, bundle_files, created_at, \
+     started_at, finished_at, solve_ms, updated_at, data_key, sealed_options";
 
 /// A job to enqueue.
 #[derive(Clone, Debug)]
@@ -196,8 +186,12 @@ pub struct NewJob {
     pub max_attempts: i64,
     /// Idempotency key.
     pub idempotency_key: Option<String>,
-    /// Canonical request hash.
+    /// Canonical request digest (keyed).
     pub request_hash: String,
+    /// Wrapped data key.
+    pub data_key: Vec<u8>,
+    /// Sealed options, if any carry the document.
+    pub sealed_options: Option<Vec<u8>>,
 }
 
 /// What enqueueing did.
@@ -219,8 +213,9 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
     // inserts, the others see no row returned and read the winner.
     let inserted = sqlx::query_as::<_, JobRow>(&format!(
         "INSERT INTO jobs (id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers,
-             method, options, state, max_attempts, idempotency_key, request_hash, created_at, updated_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?, ?)
+             method, options, state, max_attempts, idempotency_key, request_hash, created_at, updated_at,
+             data_key, sealed_options)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?, ?, ?, ?)
          ON CONFLICT (idempotency_key) DO NOTHING
          RETURNING {COLUMNS}"
     ))
@@ -238,6 +233,8 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
     .bind(&job.request_hash)
     .bind(now)
     .bind(now)
+    .bind(&job.data_key)
+    .bind(&job.sealed_options)
     .fetch_optional(pool)
     .await?;
     if let Some(row) = inserted {
@@ -254,12 +251,14 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
     }
 }
 
-/// One job.
+/// One live (not deleted) job.
 pub async fn get(pool: &SqlitePool, id: JobId) -> Result<Option<JobRow>, sqlx::Error> {
-    sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE id = ?"))
-        .bind(id)
-        .fetch_optional(pool)
-        .await
+    sqlx::query_as::<_, JobRow>(&format!(
+        "SELECT {COLUMNS} FROM jobs WHERE id = ? AND deleted_at IS NULL"
+    ))
+    .bind(id)
+    .fetch_optional(pool)
+    .await
 }
 
 /// Filters of a job listing.
@@ -281,7 +280,7 @@ pub async fn list(
     let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, JobRow>(&format!(
         "SELECT {COLUMNS} FROM jobs
-         WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR display_id = ?2)
+         WHERE deleted_at IS NULL AND (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR display_id = ?2)
            AND (created_at < ?3 OR (created_at = ?3 AND id < ?4) OR ?4 = '')
          ORDER BY created_at DESC, id DESC LIMIT ?5"
     ))
@@ -305,7 +304,7 @@ pub async fn request_cancel(writer: &Writer, id: JobId) -> Result<Option<JobRow>
              state = CASE WHEN state = 'queued' THEN 'cancelled' ELSE state END,
              finished_at = CASE WHEN state = 'queued' THEN ?1 ELSE finished_at END,
              updated_at = ?1
-         WHERE id = ?2 RETURNING {COLUMNS}"
+         WHERE id = ?2 AND deleted_at IS NULL RETURNING {COLUMNS}"
     ))
     .bind(now)
     .bind(id)
@@ -313,8 +312,8 @@ pub async fn request_cancel(writer: &Writer, id: JobId) -> Result<Option<JobRow>
     .await
 }
 
-/// Ends running jobs whose lease expired with no attempts left (`failed`, or `cancelled` if a cancel
-/// was asked for), and returns them.
+/// Ends running jobs whose lease expired with no attempts left, or that were deleted (`failed`, or
+/// `cancelled` if a cancel was asked for, as it is for every deleted job), and returns them.
 pub async fn fail_exhausted(writer: &Writer, now: i64) -> Result<Vec<JobRow>, sqlx::Error> {
     let pool = &writer.0;
     sqlx::query_as::<_, JobRow>(&format!(
@@ -324,7 +323,8 @@ pub async fn fail_exhausted(writer: &Writer, now: i64) -> Result<Vec<JobRow>, sq
                  ELSE 'the worker stopped responding (lease expired) on attempt ' || attempts || ' of ' ||
                       max_attempts || COALESCE('; earlier error: ' || last_error, '') END,
              lease_until = NULL, finished_at = ?1, updated_at = ?1
-         WHERE state = 'running' AND lease_until < ?1 AND (attempts >= max_attempts OR cancel_requested = 1)
+         WHERE state = 'running' AND lease_until < ?1
+           AND (attempts >= max_attempts OR cancel_requested = 1 OR deleted_at IS NOT NULL)
          RETURNING {COLUMNS}"
     ))
     .bind(now)
@@ -350,7 +350,7 @@ pub async fn claim_next(
          WHERE id = (
              SELECT id FROM jobs
              WHERE (state = 'queued' OR (state = 'running' AND lease_until < ?2))
-               AND attempts < max_attempts
+               AND attempts < max_attempts AND deleted_at IS NULL
              ORDER BY created_at, id LIMIT 1)
          RETURNING {COLUMNS}"
     ))
@@ -390,8 +390,8 @@ pub async fn heartbeat(
 /// What a finished bundle looks like in the row.
 #[derive(Clone, Debug)]
 pub struct Success {
-    /// Evaluation summary JSON.
-    pub evaluation_summary: Option<String>,
+    /// Evaluation summary JSON, sealed under the job's data key.
+    pub sealed_summary: Option<Vec<u8>>,
     /// Output directory, relative to the data directory.
     pub bundle_path: String,
     /// Bundle files JSON.
@@ -400,16 +400,16 @@ pub struct Success {
     pub solve_ms: i64,
 }
 
-/// Marks the caller's attempt succeeded. False if it no longer owned the job.
+/// Marks the caller's attempt succeeded. False if it no longer owned the job, or the job was deleted.
 pub async fn mark_succeeded(writer: &Writer, id: JobId, attempt: i64, s: &Success) -> Result<bool, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
-        "UPDATE jobs SET state = 'succeeded', progress = 1, evaluation_summary = ?1, bundle_path = ?2,
+        "UPDATE jobs SET state = 'succeeded', progress = 1, sealed_summary = ?1, bundle_path = ?2,
              bundle_files = ?3, solve_ms = ?4, lease_until = NULL, finished_at = ?5, updated_at = ?5
-         WHERE id = ?6 AND attempts = ?7 AND state = 'running'",
+         WHERE id = ?6 AND attempts = ?7 AND state = 'running' AND deleted_at IS NULL",
     )
-    .bind(&s.evaluation_summary)
+    .bind(&s.sealed_summary)
     .bind(&s.bundle_path)
     .bind(&s.bundle_files)
     .bind(s.solve_ms)
@@ -473,13 +473,140 @@ pub async fn requeue(
     Ok(r.rows_affected() == 1)
 }
 
-/// Number of jobs in each state.
+/// Number of live jobs in each state.
 pub async fn count_by_state(pool: &SqlitePool) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
-    let rows: Vec<(String, i64)> = sqlx::query_as("SELECT state, COUNT(*) FROM jobs GROUP BY state")
-        .fetch_all(pool)
-        .await?;
+    let rows: Vec<(String, i64)> =
+        sqlx::query_as("SELECT state, COUNT(*) FROM jobs WHERE deleted_at IS NULL GROUP BY state")
+            .fetch_all(pool)
+            .await?;
     Ok(JobState::ALL
         .into_iter()
         .map(|s| (s, rows.iter().find(|(n, _)| n == s.as_str()).map_or(0, |(_, c)| *c)))
         .collect())
+}
+
+/// Which jobs a [`purge`] deletes.
+#[derive(Clone, Copy, Debug)]
+pub enum JobSet<'a> {
+    /// This one.
+    One(JobId),
+    /// Every job that showed this document (or used it as the decoy).
+    OfDocument(&'a str),
+    /// Every job whose target or one of whose observers is this profile.
+    OfProfile(&'a str),
+    /// Every job created before this time (Unix ms): expiry.
+    CreatedBefore(i64),
+}
+
+/// What a purge leaves to remove from the disk (relative to the data directory) and which jobs it took.
+#[derive(Clone, Debug, Default)]
+pub struct Purged {
+    /// Output directories.
+    pub paths: Vec<String>,
+    /// Ids of the deleted jobs.
+    pub jobs: Vec<String>,
+}
+
+/// Inside a transaction: deletes jobs. A queued one is cancelled, a running one asked to stop (its worker
+/// drops its output: [`mark_succeeded`] refuses a deleted job); every one loses its data key, sealed
+/// options, evaluation summary and bundle listing and is kept as a tombstone (its audit trail refers to
+/// it). Returns the output directories to remove once the transaction has committed.
+pub async fn purge(
+    tx: &mut sqlx::SqliteConnection,
+    set: JobSet<'_>,
+    reason: &str,
+    now: i64,
+) -> Result<Purged, sqlx::Error> {
+    let (one, document, profile, before) = match set {
+        JobSet::One(id) => (Some(id.to_string()), None, None, None),
+        JobSet::OfDocument(d) => (None, Some(d), None, None),
+        JobSet::OfProfile(p) => (None, None, Some(p), None),
+        JobSet::CreatedBefore(t) => (None, None, None, Some(t)),
+    };
+    // A NULL parameter makes its comparison false, so exactly one line of the condition selects.
+    let rows: Vec<(String, Option<String>)> = sqlx::query_as(
+        "SELECT id, bundle_path FROM jobs WHERE deleted_at IS NULL AND (
+             id = ?1
+             OR document_id = ?2 OR decoy_document_id = ?2
+             OR profile_id = ?3
+             OR EXISTS (SELECT 1 FROM json_each(jobs.observers) WHERE json_extract(value, '$.profile_id') = ?3)
+             OR created_at < ?4)",
+    )
+    .bind(&one)
+    .bind(document)
+    .bind(profile)
+    .bind(before)
+    .fetch_all(&mut *tx)
+    .await?;
+    let mut purged = Purged::default();
+    for (id, bundle_path) in rows {
+        sqlx::query(
+            "UPDATE jobs SET
+                 cancel_requested = CASE WHEN state IN ('queued', 'running') THEN 1 ELSE cancel_requested END,
+                 last_error = CASE WHEN state = 'queued' THEN ?1 ELSE last_error END,
+                 finished_at = CASE WHEN state = 'queued' THEN ?2 ELSE finished_at END,
+                 state = CASE WHEN state = 'queued' THEN 'cancelled' ELSE state END,
+                 deleted_at = ?2, data_key = NULL, sealed_options = NULL, evaluation_summary = NULL,
+                 sealed_summary = NULL,
+                 bundle_path = NULL, bundle_files = NULL, updated_at = ?2
+             WHERE id = ?3",
+        )
+        .bind(reason)
+        .bind(now)
+        .bind(&id)
+        .execute(&mut *tx)
+        .await?;
+        purged.paths.extend(bundle_path);
+        purged.jobs.push(id);
+    }
+    Ok(purged)
+}
+
+/// Live jobs stored before sealing (no data key yet).
+pub async fn unsealed(pool: &SqlitePool) -> Result<Vec<JobRow>, sqlx::Error> {
+    sqlx::query_as::<_, JobRow>(&format!(
+        "SELECT {COLUMNS} FROM jobs WHERE data_key IS NULL AND deleted_at IS NULL"
+    ))
+    .fetch_all(pool)
+    .await
+}
+
+/// What sealing a job stored before sealing gives it.
+#[derive(Clone, Debug)]
+pub struct Sealing<'a> {
+    /// Wrapped data key.
+    pub data_key: &'a [u8],
+    /// The options' clear part.
+    pub options: &'a str,
+    /// The options' sealed part.
+    pub sealed_options: Option<&'a [u8]>,
+    /// The sealed evaluation summary.
+    pub sealed_summary: Option<&'a [u8]>,
+}
+
+/// Records that a job stored before sealing is now sealed: its data key, options split into clear and
+/// sealed parts, its summary sealed.
+pub async fn set_sealed(writer: &Writer, id: JobId, s: &Sealing<'_>) -> Result<(), sqlx::Error> {
+    sqlx::query(
+        "UPDATE jobs SET data_key = ?, options = ?, sealed_options = ?, sealed_summary = ?, evaluation_summary = NULL
+         WHERE id = ? AND deleted_at IS NULL",
+    )
+    .bind(s.data_key)
+    .bind(s.options)
+    .bind(s.sealed_options)
+    .bind(s.sealed_summary)
+    .bind(id)
+    .execute(&writer.0)
+    .await?;
+    Ok(())
+}
+
+/// Output directories (relative to the data directory) of every live job, for sweeping the ones nobody
+/// refers to.
+pub async fn live_bundle_paths(pool: &SqlitePool) -> Result<Vec<String>, sqlx::Error> {
+    let rows: Vec<(String,)> =
+        sqlx::query_as("SELECT bundle_path FROM jobs WHERE deleted_at IS NULL AND bundle_path IS NOT NULL")
+            .fetch_all(pool)
+            .await?;
+    Ok(rows.into_iter().map(|(p,)| p).collect())
 }

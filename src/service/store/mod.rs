@@ -67,6 +67,17 @@ pub async fn migrations_applied(pool: &SqlitePool) -> Result<bool, sqlx::Error> 
     Ok(MIGRATOR.iter().all(|m| applied.iter().any(|(v,)| *v == m.version)))
 }
 
+/// Moves every page of the write-ahead log into the database and truncates the log to zero bytes, so the
+/// old page images it holds (a deleted key, a deleted profile's ciphertext) are gone from it too. With
+/// `secure_delete` on, the freed space in the database file itself is zeroed. Returns whether the
+/// checkpoint completed (a long-running reader can keep it from finishing; the next one catches up).
+pub async fn checkpoint(writer: &Writer) -> Result<bool, sqlx::Error> {
+    let (busy, _, _): (i64, i64, i64) = sqlx::query_as("PRAGMA wal_checkpoint(TRUNCATE)")
+        .fetch_one(&writer.0)
+        .await?;
+    Ok(busy == 0)
+}
+
 /// Now, in the database's time unit (Unix milliseconds).
 pub fn now_ms() -> i64 {
     Utc::now().timestamp_millis()

@@ -153,10 +153,10 @@ pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Res
     super::list_page(pool, "profiles", COLUMNS, true, limit, cursor).await
 }
 
-/// Deletes a profile: its sealed versions are removed (the keys are gone), the metadata row stays as a
-/// tombstone, and queued jobs that target it are cancelled (running ones are asked to stop).
-/// Returns false if there was no such live profile.
-pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
+/// Deletes a profile: its sealed versions are removed, the metadata row stays as a tombstone, and every job
+/// it was the target or an observer of is deleted ([`super::jobs::purge`]). Returns what to remove from the
+/// disk, `None` if there was no such live profile.
+pub async fn delete(writer: &Writer, id: &str) -> Result<Option<super::jobs::Purged>, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
     let mut tx = pool.begin().await?;
@@ -168,20 +168,21 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
         .await?
         .rows_affected()
         == 1;
-    if done {
-        sqlx::query("DELETE FROM profile_versions WHERE profile_id = ?")
-            .bind(id)
-            .execute(&mut *tx)
-            .await?;
-        super::jobs::stop_jobs_of(
-            &mut tx,
-            super::jobs::JobOwner::Profile,
-            id,
-            "the target profile was deleted",
-            now,
-        )
-        .await?;
+    if !done {
+        return Ok(None);
     }
+    sqlx::query("DELETE FROM profile_versions WHERE profile_id = ?")
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    // Everything derived from the profile goes with it: every job it was the target or an observer of.
+    let purged = super::jobs::purge(
+        &mut tx,
+        super::jobs::JobSet::OfProfile(id),
+        "a profile of the job was deleted",
+        now,
+    )
+    .await?;
     tx.commit().await?;
-    Ok(done)
+    Ok(Some(purged))
 }

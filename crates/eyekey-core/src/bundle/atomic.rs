@@ -102,3 +102,14 @@ pub(crate) fn write_dir_atomically<R>(dir: &Path, contents: &[(String, Vec<u8>, 
     let _ = sync_dir(&parent);
     Ok(())
 }
+
+/// Writes `files` (plain names, bytes) as the files of directory `dir`, atomically, as
+/// [`crate::bundle::write_bundle`] does: `dir` must be absent or empty, and appears only when complete.
+pub fn write_files_atomically(dir: &Path, files: &[(String, Vec<u8>)]) -> Result<(), BundleError> {
+    check_target_dir(dir)?;
+    for (name, _) in files {
+        crate::bundle::check_plain_name(name)?;
+    }
+    let contents: Vec<(String, Vec<u8>, ())> = files.iter().map(|(n, b)| (n.clone(), b.clone(), ())).collect();
+    write_dir_atomically(dir, &contents)
+}

@@ -22,8 +22,6 @@ pub struct Manifest {
     pub barrier_mask_pixels_per_hole: u32,
     /// Identifier and version of the target's profile; never the profile's contents.
     pub profile_label: String,
-    /// Lower-case hex SHA-256 of the document that was encoded.
-    pub document_sha256: String,
     /// The encoder: method and its parameters.
     pub encoder: serde_json::Value,
     /// Solver statistics: iterations, termination, final objective, time, ...
@@ -66,8 +64,6 @@ pub enum FileRole {
 pub struct BundleMeta {
     /// Identifier and version of the target's profile; never the profile's contents.
     pub profile_label: String,
-    /// Lower-case hex SHA-256 of the document (see [`sha256_hex`]).
-    pub document_sha256: String,
     /// The encoder: method and its parameters (the serialised `EncodeOptions`).
     pub encoder: serde_json::Value,
     /// Solver statistics: iterations, termination, final objective, time, ...

@@ -6,8 +6,9 @@
 //! - the barrier mask, `barrier_mask.png`, 8-bit grey, 255 = open ([`DisplayGeometry::barrier_mask`]);
 //! - any extra files the caller adds (an evaluation report, say);
 //! - `manifest.json` ([`Manifest`]): format version, display geometry with its projector spectra and L_max,
-//!   the profile's label, the document's SHA-256, encoder and solver records, and the SHA-256 and size of
-//!   every other file.
+//!   the profile's label, encoder and solver records, and the SHA-256 and size of every other file. Never
+//!   anything of the document itself: not its text, not a hash of it (a hash of a PIN slip is the PIN, to
+//!   anyone who can render the ten thousand candidates).
 //!
 //! The checksums catch corruption and accidental edits, not forgery: whoever can rewrite the files can
 //! rewrite the manifest too.
@@ -26,7 +27,7 @@ mod write;
 
 pub use archive::*;
 use atomic::*;
-pub use atomic::{create_synced, fsync_dir};
+pub use atomic::{create_synced, fsync_dir, write_files_atomically};
 pub use error::*;
 pub use manifest::*;
 pub use read::*;
@@ -103,7 +104,6 @@ mod tests {
     fn meta() -> BundleMeta {
         BundleMeta {
             profile_label: "alice@3".to_string(),
-            document_sha256: sha256_hex(b"document"),
             encoder: serde_json::json!({ "method": "multiplex" }),
             solver: serde_json::json!({ "iterations": 12 }),
         }

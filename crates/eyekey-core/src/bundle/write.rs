@@ -35,19 +35,38 @@ pub fn write_bundle(
     extra_files: &[(String, Vec<u8>)],
     mask_pixels_per_hole: u32,
 ) -> Result<Manifest, BundleError> {
-    check_inputs(display, l, extra_files, mask_pixels_per_hole)?;
     check_target_dir(dir)?;
     // Encode before touching the disk: a failure here leaves nothing to clean up.
-    let mut contents = encode_files(display, l, extra_files, mask_pixels_per_hole)?;
+    let (manifest, files) = encode_bundle(display, l, meta, extra_files, mask_pixels_per_hole)?;
+    let contents: Vec<(String, Vec<u8>, ())> = files.into_iter().map(|(name, bytes)| (name, bytes, ())).collect();
+    write_dir_atomically(dir, &contents)?;
+    Ok(manifest)
+}
+
+/// The files of a bundle, encoded in memory and checked exactly as [`write_bundle`] checks them: the frames,
+/// the barrier mask, `extra_files` and last `manifest.json`, as (name, bytes). For callers that store the
+/// bundle elsewhere than in a plain directory (the service seals every file before it touches the disk).
+pub fn encode_bundle(
+    display: &DisplayGeometry,
+    l: &[f32],
+    meta: &BundleMeta,
+    extra_files: &[(String, Vec<u8>)],
+    mask_pixels_per_hole: u32,
+) -> Result<(Manifest, Vec<NamedBytes>), BundleError> {
+    check_inputs(display, l, extra_files, mask_pixels_per_hole)?;
+    let contents = encode_files(display, l, extra_files, mask_pixels_per_hole)?;
     let manifest = manifest_for(display, meta, &contents, mask_pixels_per_hole);
     let mut manifest_json = serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
         reason: format!("cannot serialise: {e}"),
     })?;
     manifest_json.push(b'\n');
-    contents.push((MANIFEST_FILE.to_string(), manifest_json, FileRole::Other));
-    write_dir_atomically(dir, &contents)?;
-    Ok(manifest)
+    let mut files: Vec<(String, Vec<u8>)> = contents.into_iter().map(|(name, bytes, _)| (name, bytes)).collect();
+    files.push((MANIFEST_FILE.to_string(), manifest_json));
+    Ok((manifest, files))
 }
+
+/// A file's name and contents.
+pub type NamedBytes = (String, Vec<u8>);
 
 /// A bundle file before it is written: name, bytes, role.
 type Content = (String, Vec<u8>, FileRole);
@@ -157,7 +176,6 @@ fn manifest_for(display: &DisplayGeometry, meta: &BundleMeta, contents: &[Conten
         n_frames: display.n_bands() as u32,
         barrier_mask_pixels_per_hole: mask_k,
         profile_label: meta.profile_label.clone(),
-        document_sha256: meta.document_sha256.clone(),
         encoder: meta.encoder.clone(),
         solver: meta.solver.clone(),
         files: contents

@@ -41,6 +41,19 @@ pub struct JobOutput {
     pub files: Vec<PathBuf>,
 }
 
+/// What a finished job produced, in memory: the bundle's manifest, the evaluation report, and every output
+/// file as (path relative to the output directory, bytes): the bundle's files (`frame_<n>.png`,
+/// `barrier_mask.png`, `manifest.json`) and the operator-only `report.json` and `views/<name>.png`.
+#[derive(Clone, Debug)]
+pub struct RenderedJob {
+    /// The bundle's manifest, as in `manifest.json`.
+    pub manifest: Manifest,
+    /// The evaluation report, as in `report.json` (none when the job was not evaluated).
+    pub evaluation: Option<Report>,
+    /// Every output file: relative path and contents.
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
 /// What the solver did over all rounds of an encode; recorded in the manifest's `solver`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SolverSummary {

@@ -554,16 +554,19 @@ pub fn run_job(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<JobOutput, PipelineError> {
+    let rendered = render_job(spec, cache, progress, cancel)?;
+    write_rendered(&rendered, out_dir)
+}
+
+/// Runs one job and returns its outputs in memory, nothing written (what the service seals before storing).
+pub fn render_job(
+    spec: &JobSpec,
+    cache: &TransportCache,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<RenderedJob, PipelineError> {
     let encoded = encode(spec, cache, &|p| progress(0.8 * p), cancel)?;
-    write_outputs(
-        spec,
-        &encoded,
-        out_dir,
-        true,
-        cache,
-        &|p| progress(0.8 + 0.2 * p),
-        cancel,
-    )
+    render_outputs(spec, &encoded, true, cache, &|p| progress(0.8 + 0.2 * p), cancel)
 }
 
 /// Evaluates an encoded light field (when `with_evaluation`), then writes its bundle into `out_dir` and the
@@ -577,43 +580,77 @@ pub fn write_outputs(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<JobOutput, PipelineError> {
+    let rendered = render_outputs(spec, encoded, with_evaluation, cache, progress, cancel)?;
+    write_rendered(&rendered, out_dir)
+}
+
+/// Evaluates an encoded light field (when `with_evaluation`) and encodes its bundle and evaluation files in
+/// memory.
+pub fn render_outputs(
+    spec: &JobSpec,
+    encoded: &Encoded,
+    with_evaluation: bool,
+    cache: &TransportCache,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<RenderedJob, PipelineError> {
     let meta = bundle_meta(spec, encoded)?;
-    // Evaluate first, so a cancelled or failed evaluation leaves no bundle behind.
     let evaluation = if with_evaluation {
         Some(evaluate_job(spec, encoded, cache, &|p| progress(0.9 * p), cancel)?)
     } else {
         None
     };
-    let manifest = crate::bundle::write_bundle(out_dir, &spec.display, &encoded.light_field, &meta, &[], 4)
-        .map_err(|e| PipelineError::internal("writing the bundle", e))?;
+    let (manifest, mut files) = crate::bundle::encode_bundle(&spec.display, &encoded.light_field, &meta, &[], 4)
+        .map_err(|e| PipelineError::internal("encoding the bundle", e))?;
     // Operator-only outputs live beside the bundle and are never listed in its manifest.
-    let mut files = Vec::new();
     if let Some(evaluation) = &evaluation {
-        files.extend(
-            write_evaluation(evaluation, out_dir)
-                .map_err(|e| PipelineError::internal(format!("writing {}", out_dir.display()), e))?,
-        );
+        files.extend(evaluation_files(evaluation).map_err(|e| PipelineError::internal("encoding the evaluation", e))?);
     }
-    for f in &manifest.files {
-        files.push(out_dir.join(&f.name));
-    }
-    files.push(out_dir.join(crate::bundle::MANIFEST_FILE));
     progress(1.0);
-    Ok(JobOutput {
+    Ok(RenderedJob {
         manifest,
         evaluation: evaluation.map(|e| e.report),
         files,
     })
 }
 
-/// What the manifest records about this encode.
+/// Writes rendered outputs into `out_dir`: the bundle atomically (it appears whole or not at all), then the
+/// evaluation beside it.
+fn write_rendered(rendered: &RenderedJob, out_dir: &Path) -> Result<JobOutput, PipelineError> {
+    let (bundle, rest): (Vec<_>, Vec<_>) = rendered.files.iter().cloned().partition(|(name, _)| {
+        name == crate::bundle::MANIFEST_FILE || rendered.manifest.files.iter().any(|f| &f.name == name)
+    });
+    crate::bundle::write_files_atomically(out_dir, &bundle)
+        .map_err(|e| PipelineError::internal("writing the bundle", e))?;
+    let mut files = Vec::with_capacity(rendered.files.len());
+    for (name, bytes) in &rest {
+        let path = out_dir.join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .map_err(|e| PipelineError::internal(format!("writing {}", path.display()), e))?;
+        }
+        std::fs::write(&path, bytes).map_err(|e| PipelineError::internal(format!("writing {}", path.display()), e))?;
+        files.push(path);
+    }
+    files.extend(bundle.iter().map(|(name, _)| out_dir.join(name)));
+    Ok(JobOutput {
+        manifest: rendered.manifest.clone(),
+        evaluation: rendered.evaluation.clone(),
+        files,
+    })
+}
+
+/// What the manifest records about this encode: the encoder's options without the document's text (a
+/// display must learn nothing of the document but its frames).
 fn bundle_meta(spec: &JobSpec, encoded: &Encoded) -> Result<crate::bundle::BundleMeta, PipelineError> {
-    use sha2::Digest;
     let record = |what: &str, e: serde_json::Error| PipelineError::internal(format!("recording the {what}"), e);
+    let mut encoder = serde_json::to_value(&spec.options).map_err(|e| record("encoder options", e))?;
+    if let Some(options) = encoder.as_object_mut() {
+        options.remove("document_text");
+    }
     Ok(crate::bundle::BundleMeta {
         profile_label: spec.target_label.clone(),
-        document_sha256: hex::encode(sha2::Sha256::digest(spec.document.as_raw())),
-        encoder: serde_json::to_value(&spec.options).map_err(|e| record("encoder options", e))?,
+        encoder,
         solver: serde_json::to_value(&encoded.solver).map_err(|e| record("solver summary", e))?,
     })
 }
@@ -662,18 +699,26 @@ fn evaluate_job(
 
 /// Writes `report.json` and `views/*.png` of an evaluation into `dir`; returns the paths written.
 pub fn write_evaluation(evaluation: &crate::evaluation::Evaluation, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
-    let mut files = Vec::new();
-    std::fs::create_dir_all(dir)?;
-    let report_path = dir.join("report.json");
-    let text = serde_json::to_vec_pretty(&evaluation.report).map_err(std::io::Error::other)?;
-    std::fs::write(&report_path, text)?;
-    files.push(report_path);
-    let views = dir.join("views");
-    std::fs::create_dir_all(&views)?;
+    let mut written = Vec::new();
+    std::fs::create_dir_all(dir.join("views"))?;
+    for (name, bytes) in evaluation_files(evaluation)? {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes)?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// An evaluation's files in memory: `report.json` and `views/<name>.png`, as (relative path, bytes).
+pub fn evaluation_files(evaluation: &crate::evaluation::Evaluation) -> std::io::Result<Vec<(String, Vec<u8>)>> {
+    let mut files = Vec::with_capacity(1 + evaluation.pictures.len());
+    let report = serde_json::to_vec_pretty(&evaluation.report).map_err(std::io::Error::other)?;
+    files.push(("report.json".to_string(), report));
     for (name, pic) in &evaluation.pictures {
-        let path = views.join(name);
-        crate::imaging::save_rgb_png(pic, &path).map_err(std::io::Error::other)?;
-        files.push(path);
+        let mut png = std::io::Cursor::new(Vec::new());
+        pic.write_to(&mut png, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)?;
+        files.push((format!("views/{name}"), png.into_inner()));
     }
     Ok(files)
 }

@@ -1,0 +1,214 @@
+//! Sealed objects at rest: the documents, evaluation reports, simulated views and frame bundles under the
+//! data directory.
+//!
+//! Each object has a random [`DataKey`] of its own (one per document, one per job for all its outputs),
+//! stored only wrapped by the master key in the object's row. Each file is sealed under it with
+//! ChaCha20-Poly1305 and associated data naming the object and the file ([`document_aad`], [`job_file_aad`]),
+//! so a sealed file moved to another name or row does not open. Files are written under a temporary name,
+//! fsynced and renamed, so a crash never leaves a half-written object under its real name. Nothing a display
+//! or an operator may not see is ever written in clear; plaintext exists only in memory, while a request is
+//! served or a job runs.
+
+use std::path::Path;
+
+use super::crypto::{CryptoError, DataKey, MasterKey};
+use super::store::jobs::JobRow;
+use eyekey_core::encoding::pipeline::EncodeOptions;
+
+/// Suffix of every sealed file.
+pub const SUFFIX: &str = ".sealed";
+
+/// Associated data of a document's wrapped data key.
+pub fn document_key_aad(id: &str) -> Vec<u8> {
+    format!("eyekey-document-key:{id}").into_bytes()
+}
+
+/// Associated data of a document's sealed bytes.
+pub fn document_aad(id: &str) -> Vec<u8> {
+    format!("eyekey-document:{id}").into_bytes()
+}
+
+/// Associated data of a job's wrapped data key.
+pub fn job_key_aad(id: &str) -> Vec<u8> {
+    format!("eyekey-job-key:{id}").into_bytes()
+}
+
+/// Associated data of one of a job's sealed outputs (`name` relative to its output directory, e.g.
+/// `frame_0.png` or `views/target.png`), or of its sealed options (`name` = `options`).
+pub fn job_file_aad(id: &str, name: &str) -> Vec<u8> {
+    format!("eyekey-job:{id}:{name}").into_bytes()
+}
+
+/// The key of a row's `data_key` column.
+pub fn unwrap_key(master: &MasterKey, wrapped: Option<&[u8]>, aad: &[u8]) -> Result<DataKey, CryptoError> {
+    DataKey::unwrap(master, wrapped.ok_or(CryptoError::Open)?, aad)
+}
+
+/// Writes `bytes` (already sealed) to `path`: into `.<name>.part` beside it, fsynced, then renamed, and the
+/// directory synced. The parent directory must exist.
+pub fn write_file(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let parent = path
+        .parent()
+        .ok_or_else(|| std::io::Error::other("a sealed file needs a directory"))?;
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| std::io::Error::other("a sealed file needs a plain name"))?;
+    let part = parent.join(format!(".{name}.part"));
+    let _ = std::fs::remove_file(&part);
+    let written = eyekey_core::bundle::create_synced(&part, bytes).and_then(|()| std::fs::rename(&part, path));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&part);
+        return Err(e);
+    }
+    eyekey_core::bundle::fsync_dir(parent)
+}
+
+/// Seals `plain` under `key` for `aad` and writes it to `path` (see [`write_file`]).
+pub fn seal_to_file(path: &Path, key: &DataKey, aad: &[u8], plain: &[u8]) -> std::io::Result<()> {
+    let sealed = key.seal(plain, aad).map_err(std::io::Error::other)?;
+    write_file(path, &sealed)
+}
+
+/// A job's options split for storage: the JSON kept in clear (`jobs.options`) and, when the options carry
+/// the document's text hint, that hint's JSON, to be sealed (`jobs.sealed_options`).
+pub fn split_options(options: &EncodeOptions) -> serde_json::Result<(String, Option<Vec<u8>>)> {
+    let secret = match &options.document_text {
+        Some(text) => Some(serde_json::to_vec(text)?),
+        None => None,
+    };
+    let clear = EncodeOptions {
+        document_text: None,
+        ..options.clone()
+    };
+    Ok((serde_json::to_string(&clear)?, secret))
+}
+
+/// The options [`split_options`] split, joined again (`secret` already opened).
+pub fn join_options(clear: &str, secret: Option<&[u8]>) -> serde_json::Result<EncodeOptions> {
+    let mut options: EncodeOptions = serde_json::from_str(clear)?;
+    if let Some(secret) = secret {
+        options.document_text = Some(serde_json::from_slice(secret)?);
+    }
+    Ok(options)
+}
+
+/// Associated data of a job's sealed options.
+pub fn job_options_aad(id: &str) -> Vec<u8> {
+    job_file_aad(id, "options")
+}
+
+/// Associated data of a job's sealed evaluation summary.
+pub fn job_summary_aad(id: &str) -> Vec<u8> {
+    job_file_aad(id, "summary")
+}
+
+/// Opens one of a job row's sealed fields (`name`: `options` or `summary`) under the job's key.
+fn open_job_field(master: &MasterKey, row: &JobRow, name: &str, sealed: &[u8]) -> Result<Vec<u8>, CryptoError> {
+    let id = row.id.to_string();
+    let key = unwrap_key(master, row.data_key.as_deref(), &job_key_aad(&id))?;
+    key.open(sealed, &job_file_aad(&id, name))
+}
+
+/// A job's full options: the clear part joined with the sealed part, opened under the job's key.
+pub fn job_options(master: &MasterKey, row: &JobRow) -> anyhow::Result<EncodeOptions> {
+    let secret = match &row.sealed_options {
+        Some(sealed) => Some(open_job_field(master, row, "options", sealed)?),
+        None => None,
+    };
+    Ok(join_options(&row.options, secret.as_deref())?)
+}
+
+/// A job's evaluation summary, opened under the job's key (or, for a job stored before summaries were
+/// sealed, as stored).
+pub fn job_summary(master: &MasterKey, row: &JobRow) -> anyhow::Result<Option<serde_json::Value>> {
+    let text = match (&row.sealed_summary, &row.evaluation_summary) {
+        (Some(sealed), _) => open_job_field(master, row, "summary", sealed)?,
+        (None, Some(clear)) => clear.as_bytes().to_vec(),
+        (None, None) => return Ok(None),
+    };
+    Ok(Some(serde_json::from_slice(&text)?))
+}
+
+/// Why a sealed file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// There is no such file.
+    #[error("no such sealed file")]
+    Missing,
+    /// It could not be read.
+    #[error("reading a sealed file: {0}")]
+    Io(std::io::Error),
+    /// It did not authenticate: damaged, moved, or its key is gone.
+    #[error("a sealed file did not authenticate (damaged, moved, or its key was deleted)")]
+    Open,
+}
+
+/// Reads and opens a sealed file.
+pub async fn open_file(path: &Path, key: &DataKey, aad: &[u8]) -> Result<Vec<u8>, OpenError> {
+    let sealed = match tokio::fs::read(path).await {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(OpenError::Missing),
+        Err(e) => return Err(OpenError::Io(e)),
+    };
+    key.open(&sealed, aad).map_err(|_| OpenError::Open)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sealed_file_holds_no_plaintext_and_opens_only_under_its_own_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let key = DataKey::generate();
+        let path = dir.path().join("d1.sealed");
+        seal_to_file(&path, &key, &document_aad("d1"), b"PIN 4821 PIN 4821").unwrap();
+        let on_disk = std::fs::read(&path).unwrap();
+        assert!(!on_disk.windows(4).any(|w| w == b"4821"));
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["d1.sealed"], "no temporary file left");
+        let rt = tokio::runtime::Builder::new_current_thread().build().unwrap();
+        assert_eq!(
+            rt.block_on(open_file(&path, &key, &document_aad("d1"))).unwrap(),
+            b"PIN 4821 PIN 4821"
+        );
+        assert!(matches!(
+            rt.block_on(open_file(&path, &key, &document_aad("d2"))),
+            Err(OpenError::Open)
+        ));
+        assert!(matches!(
+            rt.block_on(open_file(&dir.path().join("nope"), &key, b"")),
+            Err(OpenError::Missing)
+        ));
+    }
+
+    #[test]
+    fn options_keep_the_document_text_out_of_the_clear_part_and_join_back_whole() {
+        let options = EncodeOptions {
+            document_text: Some(eyekey_core::evaluation::DocumentText {
+                lines: vec!["PIN".into(), "4821".into()],
+                scale: 4,
+                alphabet: "0123456789".into(),
+            }),
+            ..Default::default()
+        };
+        let (clear, secret) = split_options(&options).unwrap();
+        assert!(!clear.contains("4821"), "{clear}");
+        assert!(String::from_utf8(secret.clone().unwrap()).unwrap().contains("4821"));
+        let back = join_options(&clear, secret.as_deref()).unwrap();
+        assert_eq!(
+            serde_json::to_value(&back).unwrap(),
+            serde_json::to_value(&options).unwrap()
+        );
+        let (clear, secret) = split_options(&EncodeOptions::default()).unwrap();
+        assert!(secret.is_none());
+        assert_eq!(
+            serde_json::to_value(join_options(&clear, None).unwrap()).unwrap(),
+            serde_json::to_value(EncodeOptions::default()).unwrap()
+        );
+    }
+}
