@@ -51,6 +51,14 @@ pub struct ServeArgs {
     /// Memory bound of the transport-operator cache shared by all jobs, MiB (0 disables it).
     #[arg(long, env = "EYEKEY_TRANSPORT_CACHE_MB", default_value_t = 512)]
     pub transport_cache_mb: usize,
+    /// Largest estimated peak memory of one job, MiB; jobs (and displays on which even the cheapest job) over
+    /// it are refused before they start (default: half the machine's memory).
+    #[arg(long, env = "EYEKEY_MAX_JOB_MEMORY_MB")]
+    pub max_job_memory_mb: Option<u64>,
+    /// Longest estimated run of one job on a 2-core machine, seconds; longer jobs (and displays on which even
+    /// the cheapest job would take longer) are refused before they start.
+    #[arg(long, env = "EYEKEY_MAX_JOB_SECONDS", default_value_t = 1800)]
+    pub max_job_seconds: u64,
     /// Days after which documents, jobs and their bundles are deleted (checked hourly); 0 keeps them until
     /// deleted by hand. Profiles never expire.
     #[arg(long, env = "EYEKEY_RETENTION_DAYS", default_value_t = 30, value_parser = clap::value_parser!(u32).range(0..=36500))]
@@ -78,6 +86,10 @@ pub struct Config {
     pub transport_cache_bytes: usize,
     /// Age after which documents, jobs and bundles are deleted; `None` keeps them.
     pub retention: Option<Duration>,
+    /// Largest estimated peak memory of one job, bytes.
+    pub max_job_memory_bytes: u64,
+    /// Longest estimated run of one job, seconds.
+    pub max_job_seconds: f64,
 }
 
 /// Request and upload limits.
@@ -141,6 +153,8 @@ impl Config {
             queue: QueueConfig::default(),
             transport_cache_bytes: 512 << 20,
             retention: Some(Duration::from_secs(30 * 86_400)),
+            max_job_memory_bytes: default_job_memory_bytes(),
+            max_job_seconds: 1800.0,
         }
     }
 
@@ -172,8 +186,22 @@ impl From<ServeArgs> for Config {
             },
             transport_cache_bytes: a.transport_cache_mb.saturating_mul(1 << 20),
             retention: (a.retention_days > 0).then(|| Duration::from_secs(u64::from(a.retention_days) * 86_400)),
+            max_job_memory_bytes: a
+                .max_job_memory_mb
+                .map_or_else(default_job_memory_bytes, |mb| mb.saturating_mul(1 << 20)),
+            max_job_seconds: a.max_job_seconds.max(1) as f64,
         }
     }
+}
+
+/// Half of the machine's memory (`MemTotal` of `/proc/meminfo`), or 4 GiB where it cannot be read.
+pub fn default_job_memory_bytes() -> u64 {
+    let total_kb = std::fs::read_to_string("/proc/meminfo").ok().and_then(|text| {
+        text.lines()
+            .find_map(|l| l.strip_prefix("MemTotal:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+    });
+    total_kb.map_or(4 << 30, |kb| kb * 1024 / 2)
 }
 
 /// Stands in for a secret in `Debug` output.
@@ -197,6 +225,8 @@ impl std::fmt::Debug for Config {
             .field("queue", &self.queue)
             .field("transport_cache_bytes", &self.transport_cache_bytes)
             .field("retention", &self.retention)
+            .field("max_job_memory_bytes", &self.max_job_memory_bytes)
+            .field("max_job_seconds", &self.max_job_seconds)
             .finish()
     }
 }

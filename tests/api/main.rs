@@ -7,6 +7,7 @@
 
 mod helpers;
 
+mod admission;
 mod authorization;
 mod display_client;
 mod displays;

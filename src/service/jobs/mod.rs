@@ -55,26 +55,68 @@ pub fn spawn_workers(state: &AppState, workers: usize) -> JoinSet<()> {
 async fn worker_loop(state: AppState, n: usize) {
     tracing::debug!(worker = n, "worker started");
     let mut shutdown = state.shutdown.clone();
+    let mut backoff = Backoff::default();
     while !state.shutting_down() {
-        match try_execute_next_job(&state).await {
-            Ok(Some(_)) => continue,
-            Ok(None) => {}
-            Err(e) => tracing::error!(worker = n, error = ?e, "worker step failed"),
-        }
-        // Idle: wake when a job is queued, when shutdown begins, or after the poll interval (to notice
-        // jobs whose lease expired).
+        let idle = match try_execute_next_job(&state).await {
+            Ok(Some(claim)) if backoff.repeated(claim) => {
+                // The same attempt of the same job again: the claim did not stick (the database refused the
+                // write), so claiming at once would spin. Wait as after an error.
+                tracing::warn!(worker = n, job = %claim.0, "a job was claimed twice at the same attempt; backing off");
+                backoff.failed()
+            }
+            Ok(Some(_)) => {
+                backoff.succeeded();
+                continue;
+            }
+            Ok(None) => {
+                backoff.succeeded();
+                state.config.queue.poll_interval
+            }
+            Err(e) => {
+                tracing::error!(worker = n, error = ?e, "worker step failed; backing off");
+                backoff.failed()
+            }
+        };
+        // Idle: wake when a job is queued (unless backing off), when shutdown begins, or after `idle` (to
+        // notice jobs whose lease expired).
+        let backing_off = backoff.failures > 0;
         tokio::select! {
-            _ = state.job_queued.notified() => {}
+            _ = state.job_queued.notified(), if !backing_off => {}
             _ = crate::service::state::stopped(&mut shutdown) => {}
-            _ = tokio::time::sleep(state.config.queue.poll_interval) => {}
+            _ = tokio::time::sleep(idle) => {}
         }
     }
     tracing::debug!(worker = n, "worker stopped");
 }
 
+/// A worker's backoff after failed steps: 0.5 s, doubling to 30 s, reset by a step that did its work.
+#[derive(Debug, Default)]
+struct Backoff {
+    failures: u32,
+    last_claim: Option<(JobId, i64)>,
+}
+
+impl Backoff {
+    /// Records a claim; true when it is the same job at the same attempt as the previous claim.
+    fn repeated(&mut self, claim: (JobId, i64)) -> bool {
+        self.last_claim.replace(claim) == Some(claim)
+    }
+
+    fn succeeded(&mut self) {
+        self.failures = 0;
+    }
+
+    /// Records a failure; returns how long to wait.
+    fn failed(&mut self) -> Duration {
+        self.failures = self.failures.saturating_add(1);
+        Duration::from_millis(500u64.saturating_mul(1 << (self.failures - 1).min(6))).min(Duration::from_secs(30))
+    }
+}
+
 /// One worker step: ends jobs whose lease expired with no attempts left, claims the oldest claimable
-/// job and runs it to the end of this attempt. `Ok(None)` when there was nothing to do.
-pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<JobId>> {
+/// job and runs it to the end of this attempt. Returns the job and attempt it claimed, `Ok(None)` when there
+/// was nothing to do.
+pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<(JobId, i64)>> {
     if state.shutting_down() {
         return Ok(None);
     }
@@ -88,9 +130,9 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<Job
     else {
         return Ok(None);
     };
-    let id = job.id;
+    let claim = (job.id, job.attempts);
     execute_claimed(state, job).await?;
-    Ok(Some(id))
+    Ok(Some(claim))
 }
 
 /// Why a load of a job's inputs failed.
@@ -557,6 +599,19 @@ async fn load_spec(state: &AppState, job: &JobRow) -> Result<JobSpec, LoadError>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn backoff_doubles_to_thirty_seconds_and_a_repeated_claim_is_noticed() {
+        let mut b = Backoff::default();
+        let waits: Vec<u64> = (0..9).map(|_| b.failed().as_millis() as u64).collect();
+        assert_eq!(waits, [500, 1000, 2000, 4000, 8000, 16000, 30000, 30000, 30000]);
+        b.succeeded();
+        assert_eq!(b.failed(), Duration::from_millis(500));
+        let job = JobId::new_v4();
+        assert!(!b.repeated((job, 1)));
+        assert!(b.repeated((job, 1)), "the same attempt twice");
+        assert!(!b.repeated((job, 2)), "the next attempt is progress");
+    }
 
     #[test]
     fn the_summary_keeps_headline_numbers_and_drops_long_lists() {

@@ -157,7 +157,7 @@ const TOKEN_PREFIX: &str = "ekd_";
     responses(
         (status = 201, description = "Registered; the token is shown once", body = DisplayWithToken),
         (status = 401, description = "No or unknown token", body = ErrorBody),
-        (status = 422, description = "Invalid geometry; `field` names the problem", body = ErrorBody),
+        (status = 422, description = "Invalid geometry, or one no job could run on within the memory limit; `field` names the problem", body = ErrorBody),
     ),
     security(("operator" = []))
 )]
@@ -183,6 +183,23 @@ pub async fn register_display(
         (None, Some(g)) => g,
     };
     geometry.validate().map_err(geometry_error)?;
+    let cheapest = eyekey_core::encoding::footprint::cheapest(&geometry);
+    let (memory, seconds) = (state.config.max_job_memory_bytes, state.config.max_job_seconds);
+    if cheapest.peak_bytes > memory || cheapest.seconds > seconds {
+        return Err(ApiError::invalid(
+            "geometry",
+            format!(
+                "no job could run on this display: even the cheapest (the target alone, one iteration) needs an \
+                 estimated {} MiB and {:.0} s for its {} unknowns, over the limits of {} MiB \
+                 (--max-job-memory-mb) and {:.0} s (--max-job-seconds)",
+                cheapest.peak_bytes >> 20,
+                cheapest.seconds,
+                cheapest.unknowns,
+                memory >> 20,
+                seconds
+            ),
+        ));
+    }
     let geometry_json = serde_json::to_string(&geometry).map_err(|e| ApiError::Internal(e.into()))?;
     let id = id_text(&Uuid::new_v4());
     let token = generate_token(TOKEN_PREFIX);

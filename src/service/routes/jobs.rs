@@ -30,7 +30,9 @@ use crate::service::state::{AppState, JobEvent};
 use crate::service::store::ids::JobId;
 use crate::service::store::jobs::{Enqueued, JobFilter, JobRow, JobState, NewJob};
 use crate::service::store::{self, to_time};
+use eyekey_core::encoding::footprint::footprint;
 use eyekey_core::encoding::pipeline::{EncodeOptions, Method, PipelineError};
+use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::resolvability::Resolvability;
 
 /// Routes of this resource.
@@ -272,7 +274,9 @@ pub async fn create_job(
         return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
     let request_hash = request_hash(&state.master_key, &body, &options)?;
-    let (warnings, target, observers) = resolve_inputs(&state.db, &body).await?;
+    let (display, target, observers) = resolve_inputs(&state.db, &body).await?;
+    let warnings = resolvability_warnings(&Resolvability::of(&display));
+    admit(&state.config, &display, &options, observers.len())?;
     let id = JobId::new_v4();
     let key = DataKey::generate();
     let internal = |e: crate::service::crypto::CryptoError| ApiError::Internal(e.into());
@@ -319,16 +323,45 @@ fn request_hash(master: &MasterKey, body: &CreateJob, options: &EncodeOptions) -
     Ok(master.digest("job-request", &bytes))
 }
 
-/// Checks that every input of a job creation exists; returns the display's warnings, the target profile
+/// Refuses a job whose estimated peak memory or time exceeds the configured limits, naming the estimate,
+/// the limits and what drives them, before anything is queued.
+fn admit(
+    config: &crate::service::Config,
+    display: &DisplayGeometry,
+    options: &EncodeOptions,
+    observers: usize,
+) -> Result<(), ApiError> {
+    let f = footprint(display, options, observers);
+    let (memory, seconds) = (config.max_job_memory_bytes, config.max_job_seconds);
+    if f.peak_bytes <= memory && f.seconds <= seconds {
+        return Ok(());
+    }
+    Err(ApiError::invalid(
+        "options",
+        format!(
+            "this job would need an estimated {} MiB and {:.0} s ({} unknowns, {} observers rendered by the \
+             solver), over the limits of {} MiB (--max-job-memory-mb) and {:.0} s (--max-job-seconds): use \
+             fewer population_decoys, observers, head_positions or max_iterations, or a smaller display",
+            f.peak_bytes >> 20,
+            f.seconds,
+            f.unknowns,
+            f.observers,
+            memory >> 20,
+            seconds
+        ),
+    ))
+}
+
+/// Checks that every input of a job creation exists; returns the display's geometry, the target profile
 /// and the observers pinned to their current versions.
 async fn resolve_inputs(
     db: &sqlx::SqlitePool,
     body: &CreateJob,
-) -> Result<(Vec<String>, store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
+) -> Result<(DisplayGeometry, store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
     let display = store::displays::get(db, &id_text(&body.display_id))
         .await?
         .ok_or_else(|| ApiError::invalid("display_id", "no such display"))?;
-    let warnings = geometry_warnings(&display.geometry)?;
+    let geometry = stored_geometry(&display.geometry)?;
     store::documents::get(db, &id_text(&body.document_id))
         .await?
         .ok_or_else(|| ApiError::invalid("document_id", "no such document"))?;
@@ -350,7 +383,7 @@ async fn resolve_inputs(
             version: p.current_version,
         });
     }
-    Ok((warnings, target, observers))
+    Ok((geometry, target, observers))
 }
 
 /// Enqueues a job, or finds the one this idempotency key already created: `201` and the new job (audited,
