@@ -1,7 +1,7 @@
 //! The client's configuration: the command line of `eyekey display-client` and the [`ClientConfig`] a sync
 //! runs with.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use super::error::{error_chain, io_err, ClientError};
@@ -40,6 +40,14 @@ pub struct DisplayClientArgs {
     /// Longest wait between reconnection attempts while the server is unreachable, seconds.
     #[arg(long, default_value_t = 60)]
     pub max_backoff_secs: u64,
+    /// A CA certificate (PEM) to trust for the server's TLS certificate, besides the system's roots (which
+    /// also honour `SSL_CERT_FILE`).
+    #[arg(long, env = "EYEKEY_CA")]
+    pub ca: Option<PathBuf>,
+    /// Allow a plain `http://` server that is not on this machine (the token and the frames would cross the
+    /// network in clear).
+    #[arg(long)]
+    pub insecure_http: bool,
 }
 
 impl std::fmt::Debug for DisplayClientArgs {
@@ -53,6 +61,8 @@ impl std::fmt::Debug for DisplayClientArgs {
             .field("preview", &self.preview)
             .field("poll_secs", &self.poll_secs)
             .field("max_backoff_secs", &self.max_backoff_secs)
+            .field("ca", &self.ca)
+            .field("insecure_http", &self.insecure_http)
             .finish()
     }
 }
@@ -98,8 +108,21 @@ impl std::fmt::Debug for ClientConfig {
 }
 
 impl ClientConfig {
-    /// A configuration with default timings (poll every 5 s, backoff 1 s doubling up to 60 s).
+    /// A configuration with default timings (poll every 5 s, backoff 1 s doubling up to 60 s), trusting the
+    /// system's roots, refusing plain HTTP to anything but this machine.
     pub fn new(server: &str, token: &str, out_dir: impl Into<PathBuf>) -> Result<Self, ClientError> {
+        Self::with_transport(server, token, out_dir, None, false)
+    }
+
+    /// [`ClientConfig::new`] that also trusts the CA certificate in `ca` (PEM), and with `insecure_http`
+    /// allows plain HTTP to another machine.
+    pub fn with_transport(
+        server: &str,
+        token: &str,
+        out_dir: impl Into<PathBuf>,
+        ca: Option<&Path>,
+        insecure_http: bool,
+    ) -> Result<Self, ClientError> {
         let url = reqwest::Url::parse(server)
             .map_err(|e| ClientError::Config(format!("--server {server:?} is not a URL: {e}")))?;
         if !matches!(url.scheme(), "http" | "https") || url.host_str().is_none() {
@@ -118,10 +141,32 @@ impl ClientConfig {
                 "the display token is empty: pass --token or set EYEKEY_DISPLAY_TOKEN".into(),
             ));
         }
-        let http = reqwest::Client::builder()
+        if url.scheme() == "http" && !insecure_http && !is_loopback(&url) {
+            return Err(ClientError::Config(format!(
+                "--server {server:?} is plain http to another machine: the token and the frames would cross the \
+                 network in clear. Use https, or pass --insecure-http"
+            )));
+        }
+        let mut builder = reqwest::Client::builder()
             .connect_timeout(Duration::from_secs(10))
             .read_timeout(READ_IDLE_TIMEOUT)
-            .user_agent(concat!("eyekey-display-client/", env!("CARGO_PKG_VERSION")))
+            .https_only(url.scheme() == "https")
+            .user_agent(concat!("eyekey-display-client/", env!("CARGO_PKG_VERSION")));
+        if let Some(path) = ca {
+            let pem = std::fs::read(path).map_err(io_err("read the --ca certificate", path))?;
+            let certs = reqwest::Certificate::from_pem_bundle(&pem)
+                .map_err(|e| ClientError::Config(format!("--ca {}: {}", path.display(), error_chain(&e))))?;
+            if certs.is_empty() {
+                return Err(ClientError::Config(format!(
+                    "--ca {} holds no PEM certificate",
+                    path.display()
+                )));
+            }
+            for cert in certs {
+                builder = builder.add_root_certificate(cert);
+            }
+        }
+        let http = builder
             .build()
             .map_err(|e| ClientError::Config(format!("cannot set up the HTTP client: {}", error_chain(&e))))?;
         Ok(Self {
@@ -140,7 +185,7 @@ impl ClientConfig {
 
     /// The configuration of `eyekey display-client`; reads the `--preview` profile.
     pub fn from_args(a: &DisplayClientArgs) -> Result<Self, ClientError> {
-        let mut cfg = Self::new(&a.server, &a.token, &a.out)?;
+        let mut cfg = Self::with_transport(&a.server, &a.token, &a.out, a.ca.as_deref(), a.insecure_http)?;
         if let Some(path) = &a.preview {
             let text = std::fs::read_to_string(path).map_err(io_err("read the --preview profile", path))?;
             let profile = VisionProfile::from_json(&text)
@@ -162,6 +207,13 @@ impl ClientConfig {
     }
 }
 
+/// True when the URL's host is this machine: `localhost`, 127.0.0.0/8 or ::1.
+fn is_loopback(url: &reqwest::Url) -> bool {
+    let Some(host) = url.host_str() else { return false };
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost") || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -174,5 +226,19 @@ mod tests {
         let c = ClientConfig::new("http://127.0.0.1:8080/", "secret", "/tmp/x").unwrap();
         assert_eq!(c.url("/v1/frames/jobs"), "http://127.0.0.1:8080/v1/frames/jobs");
         assert!(!format!("{c:?}").contains("secret"));
+    }
+
+    #[test]
+    fn plain_http_is_only_for_this_machine_unless_allowed() {
+        for local in ["http://127.0.0.1:8080", "http://localhost:1", "http://[::1]:8080"] {
+            assert!(ClientConfig::new(local, "t", "/tmp/x").is_ok(), "{local}");
+        }
+        let err = ClientConfig::new("http://10.0.0.7:8080", "t", "/tmp/x").unwrap_err();
+        assert!(err.to_string().contains("--insecure-http"), "{err}");
+        assert!(ClientConfig::with_transport("http://10.0.0.7:8080", "t", "/tmp/x", None, true).is_ok());
+        assert!(ClientConfig::new("https://10.0.0.7:8443", "t", "/tmp/x").is_ok());
+        let missing =
+            ClientConfig::with_transport("https://x", "t", "/tmp/x", Some(Path::new("/nonexistent.pem")), false);
+        assert!(missing.is_err());
     }
 }

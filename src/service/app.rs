@@ -8,7 +8,6 @@ use std::sync::Arc;
 use anyhow::Context as _;
 use axum::extract::DefaultBodyLimit;
 use axum::http::StatusCode;
-use axum::serve::ListenerExt as _;
 use axum::Router;
 use tokio::net::TcpListener;
 use tokio::sync::{broadcast, watch, Notify};
@@ -39,6 +38,9 @@ pub struct Application {
     state: AppState,
     shutdown: ShutdownHandle,
     operator_token_file: Option<PathBuf>,
+    tls: Option<tokio_rustls::TlsAcceptor>,
+    /// Held while this process uses the data directory.
+    _lock: std::fs::File,
 }
 
 /// Starts a graceful shutdown of an [`Application`] from elsewhere (signals do it too).
@@ -62,6 +64,7 @@ impl Application {
                 .with_context(|| format!("creating {}", data_dir.join(sub).display()))?;
         }
         restrict_dir(&data_dir);
+        let lock = lock_data_dir(&data_dir)?;
 
         let (operator_token, operator_token_file) = match &config.operator_token {
             Some(t) => (t.clone(), None),
@@ -71,11 +74,22 @@ impl Application {
                 (token, Some(path))
             }
         };
-        let master_key_text = match &config.master_key_hex {
-            Some(k) => k.clone(),
-            None => read_or_create_secret(&data_dir.join(MASTER_KEY_FILE), "master key", MasterKey::generate_hex)?,
+        let master_key = match &config.master_key_hex {
+            Some(k) => MasterKey::from_hex(k).context("the master key given by --master-key or EYEKEY_MASTER_KEY")?,
+            None => {
+                let path = data_dir.join(MASTER_KEY_FILE);
+                if !path.exists() && config.database_path().exists() {
+                    anyhow::bail!(
+                        "{} holds sealed data but {} is missing: restore the master key from its backup (or give \
+                         it with EYEKEY_MASTER_KEY); a new key could not open what is stored",
+                        data_dir.display(),
+                        path.display()
+                    );
+                }
+                let text = read_or_create_secret(&path, "master key", MasterKey::generate_hex)?;
+                MasterKey::from_hex(&text).with_context(|| format!("the master key in {}", path.display()))?
+            }
         };
-        let master_key = MasterKey::from_hex(&master_key_text).context("EYEKEY_MASTER_KEY")?;
 
         let (db, writer) = store::connect(&config.database_path())
             .await
@@ -84,6 +98,15 @@ impl Application {
         store::check_master_key(&writer, &master_key).await?;
         tracing::info!(database = %config.database_path().display(), "database ready");
 
+        let tls = match &config.tls {
+            Some((cert, key)) => Some(super::listener::tls_acceptor(cert, key)?),
+            None if !config.bind.ip().is_loopback() && !config.insecure_http => anyhow::bail!(
+                "refusing to serve plain HTTP on {}, which is not a loopback address: give --tls-cert and \
+                 --tls-key, or --insecure-http behind a TLS-terminating proxy on this host",
+                config.bind
+            ),
+            None => None,
+        };
         let listener = TcpListener::bind(config.bind)
             .await
             .with_context(|| format!("binding {}", config.bind))?;
@@ -119,6 +142,8 @@ impl Application {
             state,
             shutdown: ShutdownHandle(Arc::new(shutdown_tx)),
             operator_token_file,
+            tls,
+            _lock: lock,
         })
     }
 
@@ -130,6 +155,15 @@ impl Application {
     /// The address the listener is bound to.
     pub fn local_addr(&self) -> SocketAddr {
         self.listener.local_addr().unwrap_or(self.state.config.bind)
+    }
+
+    /// `https` when TLS is configured, else `http`.
+    pub fn scheme(&self) -> &'static str {
+        if self.tls.is_some() {
+            "https"
+        } else {
+            "http"
+        }
     }
 
     /// The shared state (the tests drive the worker step with it).
@@ -153,14 +187,17 @@ impl Application {
     /// stop claiming, and running jobs are cancelled and re-queued (their attempt not counted) within the
     /// configured grace period; a job still running after it is picked up again when its lease expires.
     pub async fn run_until_stopped(self) -> anyhow::Result<()> {
+        let scheme = self.scheme();
         let Self {
             listener,
             router,
             state,
             shutdown,
+            tls,
+            _lock: lock,
             ..
         } = self;
-        tracing::info!(address = %listener.local_addr()?, workers = state.config.workers, "eyekey serving");
+        tracing::info!(address = %listener.local_addr()?, scheme, workers = state.config.workers, "eyekey serving");
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
         let retention = super::retention::spawn_retention(&state);
 
@@ -170,20 +207,16 @@ impl Application {
             tracing::info!("shutdown signal received");
             signal_shutdown.shutdown();
         });
-        let mut stopped = state.shutdown.clone();
-        // TCP_NODELAY: a streamed body goes out in several writes, and Nagle's algorithm with the client's
-        // delayed ACK would hold each response's last segment for ~40 ms.
-        let listener = listener.tap_io(|tcp| {
-            if let Err(e) = tcp.set_nodelay(true) {
-                tracing::debug!(error = %e, "could not set TCP_NODELAY");
-            }
-        });
-        axum::serve(listener, router)
-            .with_graceful_shutdown(async move {
-                super::state::stopped(&mut stopped).await;
-            })
-            .await
-            .context("serving HTTP")?;
+        super::listener::serve(
+            listener,
+            router,
+            tls,
+            state.config.limits.header_read_timeout,
+            state.shutdown.clone(),
+            state.config.queue.shutdown_grace,
+        )
+        .await
+        .context("serving HTTP")?;
 
         shutdown.shutdown();
         let grace = state.config.queue.shutdown_grace;
@@ -198,6 +231,7 @@ impl Application {
         retention.abort();
         state.db.close().await;
         state.writer.0.close().await;
+        drop(lock);
         tracing::info!("eyekey stopped");
         Ok(())
     }
@@ -215,6 +249,7 @@ fn router(state: AppState) -> Router {
             StatusCode::REQUEST_TIMEOUT,
             limits.request_timeout,
         ))
+        .layer(axum::middleware::from_fn_with_state(state.clone(), reject_oversize))
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(axum::middleware::map_response(json_error_bodies))
         // Every request gets an `x-request-id` (the client's, or a new UUID), echoed in the response and
@@ -226,6 +261,36 @@ fn router(state: AppState) -> Router {
         }))
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
         .with_state(state)
+}
+
+/// Answers 413 at once when a request's `Content-Length` exceeds the limit of its route (uploads:
+/// `max_document_bytes`; everything else: `max_body_bytes`), before a byte of the body is read.
+async fn reject_oversize(
+    axum::extract::State(state): axum::extract::State<AppState>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    use axum::response::IntoResponse as _;
+    let limits = &state.config.limits;
+    let upload = request.method() == axum::http::Method::POST && request.uri().path() == "/v1/documents";
+    let limit = if upload {
+        limits.max_document_bytes
+    } else {
+        limits.max_body_bytes
+    } as u64;
+    let declared = request
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    match declared {
+        Some(len) if len > limit => super::error::ApiError::TooLarge {
+            field: Some("body".into()),
+            message: format!("the body's {len} bytes exceed the limit of {limit} bytes"),
+        }
+        .into_response(),
+        _ => next.run(request).await,
+    }
 }
 
 /// Completes on Ctrl-C, or SIGTERM on Unix (what `docker stop` sends). The service and the display client
@@ -251,6 +316,39 @@ pub async fn stop_signal() {
         _ = ctrl_c => {}
         _ = term => {}
     }
+}
+
+/// File in the data directory that a running server holds locked.
+pub const LOCK_FILE: &str = "eyekey.lock";
+
+/// Takes the data directory's lock (an advisory lock on `eyekey.lock`, released when the process ends,
+/// however it ends), so a second server cannot open the same data.
+fn lock_data_dir(data_dir: &Path) -> anyhow::Result<std::fs::File> {
+    let path = data_dir.join(LOCK_FILE);
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::io::AsRawFd as _;
+        // SAFETY: flock on a file descriptor this function owns; the lock goes with the descriptor.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::WouldBlock {
+                anyhow::bail!(
+                    "another eyekey server is using {} (it holds {}); stop it first, or give this one its own \
+                     --data-dir",
+                    data_dir.display(),
+                    path.display()
+                );
+            }
+            return Err(anyhow::Error::new(e).context(format!("locking {}", path.display())));
+        }
+    }
+    Ok(file)
 }
 
 /// Reads a secret file, or creates it (mode 0600) with a generated value. Logs the path, never the value.

@@ -14,6 +14,19 @@ pub struct ServeArgs {
     /// Address and port to listen on.
     #[arg(long, env = "EYEKEY_BIND", default_value = "127.0.0.1:8080")]
     pub bind: SocketAddr,
+    /// TLS certificate chain (PEM); with `--tls-key`, the service speaks only HTTPS.
+    #[arg(long, env = "EYEKEY_TLS_CERT", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM: PKCS#8, PKCS#1 or SEC1).
+    #[arg(long, env = "EYEKEY_TLS_KEY", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// Serve plain HTTP on an address other than loopback (tokens and frames would cross the network in
+    /// clear; only behind a TLS-terminating proxy on the same host).
+    #[arg(long, env = "EYEKEY_INSECURE_HTTP")]
+    pub insecure_http: bool,
+    /// Time a client has to send a request's headers (and to finish a TLS handshake), seconds.
+    #[arg(long, env = "EYEKEY_HEADER_TIMEOUT_SECS", default_value_t = 10)]
+    pub header_timeout_secs: u64,
     /// Directory holding the database, uploaded documents, job outputs and generated secrets.
     #[arg(long, env = "EYEKEY_DATA_DIR", default_value = "./eyekey-data")]
     pub data_dir: PathBuf,
@@ -59,6 +72,9 @@ pub struct ServeArgs {
     /// the cheapest job would take longer) are refused before they start.
     #[arg(long, env = "EYEKEY_MAX_JOB_SECONDS", default_value_t = 1800)]
     pub max_job_seconds: u64,
+    /// Free space the data directory must keep, MiB: below it `/readyz` reports not ready.
+    #[arg(long, env = "EYEKEY_MIN_FREE_MB", default_value_t = 256)]
+    pub min_free_mb: u64,
     /// Days after which documents, jobs and their bundles are deleted (checked hourly); 0 keeps them until
     /// deleted by hand. Profiles never expire.
     #[arg(long, env = "EYEKEY_RETENTION_DAYS", default_value_t = 30, value_parser = clap::value_parser!(u32).range(0..=36500))]
@@ -70,6 +86,10 @@ pub struct ServeArgs {
 pub struct Config {
     /// Listen address; port 0 picks a free port (see `Application::port`).
     pub bind: SocketAddr,
+    /// TLS certificate chain and key (PEM files); `None` serves plain HTTP.
+    pub tls: Option<(PathBuf, PathBuf)>,
+    /// Allow plain HTTP on a non-loopback address.
+    pub insecure_http: bool,
     /// Data directory.
     pub data_dir: PathBuf,
     /// Operator token; `None` reads or generates `<data_dir>/operator-token`.
@@ -90,6 +110,8 @@ pub struct Config {
     pub max_job_memory_bytes: u64,
     /// Longest estimated run of one job, seconds.
     pub max_job_seconds: f64,
+    /// Free space below which the service is not ready, bytes.
+    pub min_free_bytes: u64,
 }
 
 /// Request and upload limits.
@@ -103,6 +125,8 @@ pub struct Limits {
     pub max_body_bytes: usize,
     /// Time until a response starts.
     pub request_timeout: Duration,
+    /// Time a client has to send its request headers (and finish a TLS handshake).
+    pub header_read_timeout: Duration,
 }
 
 /// Durable-queue behaviour.
@@ -125,6 +149,7 @@ impl Default for Limits {
             max_document_pixels: 16 * 1024 * 1024,
             max_body_bytes: 1024 * 1024,
             request_timeout: Duration::from_secs(30),
+            header_read_timeout: Duration::from_secs(10),
         }
     }
 }
@@ -145,6 +170,8 @@ impl Config {
     pub fn new(data_dir: impl Into<PathBuf>) -> Self {
         Self {
             bind: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            tls: None,
+            insecure_http: false,
             data_dir: data_dir.into(),
             operator_token: None,
             master_key_hex: None,
@@ -155,6 +182,7 @@ impl Config {
             retention: Some(Duration::from_secs(30 * 86_400)),
             max_job_memory_bytes: default_job_memory_bytes(),
             max_job_seconds: 1800.0,
+            min_free_bytes: 256 << 20,
         }
     }
 
@@ -168,6 +196,8 @@ impl From<ServeArgs> for Config {
     fn from(a: ServeArgs) -> Self {
         Self {
             bind: a.bind,
+            tls: a.tls_cert.zip(a.tls_key),
+            insecure_http: a.insecure_http,
             data_dir: a.data_dir,
             operator_token: a.operator_token.filter(|t| !t.is_empty()),
             master_key_hex: a.master_key.filter(|k| !k.is_empty()),
@@ -177,6 +207,7 @@ impl From<ServeArgs> for Config {
                 max_document_pixels: a.max_document_pixels,
                 max_body_bytes: a.max_body_bytes,
                 request_timeout: Duration::from_secs(a.request_timeout_secs.max(1)),
+                header_read_timeout: Duration::from_secs(a.header_timeout_secs.max(1)),
             },
             queue: QueueConfig {
                 lease: Duration::from_secs(a.lease_secs.max(1)),
@@ -190,6 +221,7 @@ impl From<ServeArgs> for Config {
                 .max_job_memory_mb
                 .map_or_else(default_job_memory_bytes, |mb| mb.saturating_mul(1 << 20)),
             max_job_seconds: a.max_job_seconds.max(1) as f64,
+            min_free_bytes: a.min_free_mb.saturating_mul(1 << 20),
         }
     }
 }
@@ -217,6 +249,8 @@ impl std::fmt::Debug for Config {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Config")
             .field("bind", &self.bind)
+            .field("tls", &self.tls)
+            .field("insecure_http", &self.insecure_http)
             .field("data_dir", &self.data_dir)
             .field("operator_token", &redacted(&self.operator_token))
             .field("master_key_hex", &redacted(&self.master_key_hex))
@@ -227,6 +261,7 @@ impl std::fmt::Debug for Config {
             .field("retention", &self.retention)
             .field("max_job_memory_bytes", &self.max_job_memory_bytes)
             .field("max_job_seconds", &self.max_job_seconds)
+            .field("min_free_bytes", &self.min_free_bytes)
             .finish()
     }
 }

@@ -197,10 +197,32 @@ impl From<sqlx::Error> for ApiError {
     }
 }
 
+impl ApiError {
+    /// An internal error whose cause is a full or read-only disk, anywhere in its chain, becomes the 507 or
+    /// 503 that says so.
+    fn storage_cause(self) -> Self {
+        let Self::Internal(e) = &self else { return self };
+        for cause in e.chain() {
+            if let Some(db) = cause.downcast_ref::<sqlx::Error>() {
+                if is_disk_full(db) {
+                    return Self::InsufficientStorage(
+                        "the data directory is full; nothing was stored. Free space and retry".into(),
+                    );
+                }
+            }
+            if let Some(problem) = cause.downcast_ref::<std::io::Error>().and_then(storage_problem) {
+                return problem;
+            }
+        }
+        self
+    }
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        let status = self.status_code();
-        let message = match &self {
+        let this = self.storage_cause();
+        let status = this.status_code();
+        let message = match &this {
             Self::Internal(e) => {
                 tracing::error!(error = ?e, "internal error");
                 "internal server error".to_string()
@@ -209,9 +231,9 @@ impl IntoResponse for ApiError {
         };
         let body = ErrorBody {
             error: ErrorDetail {
-                code: self.code(),
+                code: this.code(),
                 message,
-                field: self.field(),
+                field: this.field(),
             },
         };
         let mut response = (status, axum::Json(body)).into_response();

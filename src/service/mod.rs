@@ -16,6 +16,7 @@ pub mod crypto;
 pub mod error;
 pub mod images;
 pub mod jobs;
+pub mod listener;
 pub mod openapi;
 pub mod retention;
 pub mod routes;

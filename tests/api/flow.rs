@@ -201,6 +201,7 @@ async fn fifty_jobs_submitted_at_once_all_finish() {
     let metrics = app
         .client
         .get(app.url("/metrics"))
+        .bearer_auth(crate::helpers::OPERATOR_TOKEN)
         .send()
         .await
         .unwrap()

@@ -65,7 +65,7 @@ pub async fn spawn_app_in(data_dir: &Path, configure: impl FnOnce(&mut Config)) 
     let mut config = test_config(data_dir);
     configure(&mut config);
     let app = Application::build(config).await.expect("the application builds");
-    let address = format!("http://127.0.0.1:{}", app.port());
+    let address = format!("{}://127.0.0.1:{}", app.scheme(), app.port());
     let state = app.state();
     let shutdown = app.shutdown_handle();
     let server = tokio::spawn(app.run_until_stopped());

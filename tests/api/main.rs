@@ -22,3 +22,4 @@ mod profiles;
 mod queue;
 mod restart;
 mod sealed;
+mod transport;

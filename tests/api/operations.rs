@@ -42,6 +42,7 @@ async fn metrics_report_jobs_by_state_queue_depth_and_http_latency_by_route() {
     let text = app
         .client
         .get(app.url("/metrics"))
+        .bearer_auth(crate::helpers::OPERATOR_TOKEN)
         .send()
         .await
         .unwrap()
@@ -49,6 +50,12 @@ async fn metrics_report_jobs_by_state_queue_depth_and_http_latency_by_route() {
         .await
         .unwrap();
     assert!(text.contains("eyekey_queue_depth"), "{text}");
+    let anonymous = app.client.get(app.url("/metrics")).send().await.unwrap();
+    assert_eq!(
+        anonymous.status(),
+        reqwest::StatusCode::UNAUTHORIZED,
+        "metrics are for the operator"
+    );
     assert!(text.contains("eyekey_jobs{state=\"queued\"}"), "{text}");
     assert!(text.contains("eyekey_http_request_duration_seconds_bucket"), "{text}");
     assert!(

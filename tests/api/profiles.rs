@@ -151,3 +151,46 @@ async fn profiles_are_listed_newest_first_in_pages() {
     .await;
     assert_eq!(e["field"], "cursor");
 }
+
+#[tokio::test]
+async fn labels_and_names_refuse_control_and_bidirectional_override_characters() {
+    let app = crate::helpers::spawn_app().await;
+    for bad in ["a\u{0}b", "tab\there", "pay\u{202E}lam", "x\u{2066}y"] {
+        let r = app
+            .op_post(
+                "/v1/profiles",
+                &serde_json::json!({ "label": bad, "profile": crate::helpers::myope() }),
+            )
+            .await;
+        let e = crate::helpers::expect_error(r, reqwest::StatusCode::UNPROCESSABLE_ENTITY, "invalid").await;
+        assert_eq!(e["field"], "label", "{bad:?}");
+        let r = app
+            .op_post(
+                "/v1/displays",
+                &serde_json::json!({ "name": bad, "geometry": crate::helpers::tiny_display() }),
+            )
+            .await;
+        let e = crate::helpers::expect_error(r, reqwest::StatusCode::UNPROCESSABLE_ENTITY, "invalid").await;
+        assert_eq!(e["field"], "name", "{bad:?}");
+    }
+    let r = app
+        .op_post(
+            "/v1/profiles",
+            &serde_json::json!({ "label": "Ünïcode ✓ 名前", "profile": crate::helpers::myope() }),
+        )
+        .await;
+    assert_eq!(r.status(), reqwest::StatusCode::CREATED);
+    // An Idempotency-Key is visible ASCII only.
+    let f = app.fixtures().await;
+    let r = app
+        .client
+        .post(app.url("/v1/jobs"))
+        .bearer_auth(crate::helpers::OPERATOR_TOKEN)
+        .header("Idempotency-Key", "a\tb")
+        .json(&crate::helpers::job_body(&f))
+        .send()
+        .await
+        .unwrap();
+    let e = crate::helpers::expect_error(r, reqwest::StatusCode::UNPROCESSABLE_ENTITY, "invalid").await;
+    assert_eq!(e["field"], "Idempotency-Key");
+}

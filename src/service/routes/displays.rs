@@ -170,6 +170,7 @@ pub async fn register_display(
     if name.is_empty() || name.chars().count() > 200 {
         return Err(ApiError::invalid("name", "name must be 1 to 200 characters"));
     }
+    super::check_text("name", name, 200)?;
     let geometry = match (body.preset, body.geometry) {
         (Some(_), Some(_)) => return Err(ApiError::invalid("preset", "give either preset or geometry, not both")),
         (None, None) => return Err(ApiError::invalid("geometry", "give a preset or a geometry")),

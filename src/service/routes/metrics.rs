@@ -1,4 +1,4 @@
-//! Prometheus metrics (no authentication; expose the port only where scrapers run).
+//! Prometheus metrics, for the operator token only (a scraper is given it as a bearer token).
 //!
 //! - `eyekey_jobs{state}` and `eyekey_queue_depth`: gauges read from the database at scrape time;
 //! - `eyekey_solve_duration_seconds{outcome}`: histogram of solver wall time per attempt;
@@ -59,9 +59,13 @@ pub fn recorder() -> PrometheusHandle {
 /// Prometheus text exposition.
 #[utoipa::path(
     get, path = "/metrics", tag = "operations",
-    responses((status = 200, description = "Prometheus text format", content_type = "text/plain", body = String))
+    responses(
+        (status = 200, description = "Prometheus text format", content_type = "text/plain", body = String),
+        (status = 401, description = "No or unknown token", body = crate::service::error::ErrorBody),
+    ),
+    security(("operator" = []))
 )]
-pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError> {
+pub async fn scrape(State(state): State<AppState>, _: crate::service::auth::Operator) -> Result<Response, ApiError> {
     let counts = store::jobs::count_by_state(&state.db).await?;
     for (s, n) in &counts {
         metrics::gauge!("eyekey_jobs", "state" => s.as_str()).set(*n as f64);

@@ -78,6 +78,30 @@ pub fn next_cursor<T>(items: &[T], limit: u32, key: impl Fn(&T) -> (i64, String)
     })
 }
 
+/// Checks a human-readable text field (a label, a name): at most `max` characters, and no control
+/// characters or bidirectional overrides, which could make a log line or a console show something other
+/// than what is stored.
+pub fn check_text(field: &str, value: &str, max: usize) -> Result<(), ApiError> {
+    if value.chars().count() > max {
+        return Err(ApiError::invalid(
+            field,
+            format!("{field} must be at most {max} characters"),
+        ));
+    }
+    let bidi =
+        |c: char| matches!(c, '\u{061C}' | '\u{200E}' | '\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}');
+    if let Some(c) = value.chars().find(|&c| c.is_control() || bidi(c)) {
+        return Err(ApiError::invalid(
+            field,
+            format!(
+                "{field} must not contain control or bidirectional-override characters (found U+{:04X})",
+                c as u32
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The stored (hyphenated) form of an id.
 pub fn id_text(id: &Uuid) -> String {
     id.hyphenated().to_string()

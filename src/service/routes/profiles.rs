@@ -100,6 +100,7 @@ impl From<&ProfileRow> for ProfileMeta {
 
 fn check(body: &EnrolProfile) -> Result<Vec<u8>, ApiError> {
     if let Some(label) = &body.label {
+        super::check_text("label", label, 200)?;
         if label.chars().count() > 200 {
             return Err(ApiError::invalid("label", "label must be at most 200 characters"));
         }
