@@ -38,10 +38,12 @@ use super::routes;
         routes::documents::upload_document,
         routes::documents::list_documents,
         routes::documents::get_document,
+        routes::documents::delete_document,
         routes::jobs::create_job,
         routes::jobs::list_jobs,
         routes::jobs::get_job,
         routes::jobs::cancel_job,
+        routes::jobs::delete_job,
         routes::jobs::job_events,
         routes::evaluation::get_evaluation,
         routes::evaluation::list_views,
@@ -52,6 +54,9 @@ use super::routes;
         routes::frames::download_file,
         routes::frames::frame_events,
         routes::audit::list_audit,
+        routes::tokens::create_token,
+        routes::tokens::list_tokens,
+        routes::tokens::revoke_token,
     ),
     modifiers(&BearerSchemes),
     tags(
@@ -61,8 +66,9 @@ use super::routes;
         (name = "jobs", description = "Encoding jobs (operator)"),
         (name = "evaluation", description = "Reports and simulated views of succeeded jobs (operator)"),
         (name = "frames", description = "Frame bundles for a display client (display token)"),
-        (name = "audit", description = "Append-only audit log (operator)"),
-        (name = "operations", description = "Health, readiness and metrics (no token)"),
+        (name = "audit", description = "Append-only audit log (operator, admin scope)"),
+        (name = "tokens", description = "Scoped operator tokens (operator, admin scope)"),
+        (name = "operations", description = "Health and readiness (no token); metrics (operator, admin scope)"),
     )
 )]
 pub struct ApiDoc;
@@ -74,7 +80,11 @@ impl Modify for BearerSchemes {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
         let mut operator = Http::new(HttpAuthScheme::Bearer);
-        operator.description = Some("The operator token (EYEKEY_OPERATOR_TOKEN or <data-dir>/operator-token)".into());
+        operator.description = Some(
+            "An operator token: the bootstrap token (EYEKEY_OPERATOR_TOKEN or <data-dir>/operator-token, scope admin) or one \
+             made with POST /v1/tokens; each operation needs one of the scopes its description names"
+                .into(),
+        );
         components.add_security_scheme("operator", SecurityScheme::Http(operator));
         let mut display = Http::new(HttpAuthScheme::Bearer);
         display.description = Some("A display's access token, shown once at registration or rotation".into());

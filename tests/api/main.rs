@@ -22,4 +22,5 @@ mod profiles;
 mod queue;
 mod restart;
 mod sealed;
+mod tokens;
 mod transport;

@@ -7,7 +7,7 @@ use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
 
 use super::PageQuery;
-use crate::service::auth::Operator;
+use crate::service::auth::{scope, Operator};
 use crate::service::error::{ApiError, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
 use crate::service::store::{self, to_time, Cursor};
@@ -49,11 +49,11 @@ pub struct AuditList {
         (status = 200, description = "A page of entries", body = AuditList),
         (status = 401, description = "No or unknown token", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["admin"]))
 )]
 pub async fn list_audit(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::Admin>,
     ApiQuery(page): ApiQuery<PageQuery>,
 ) -> Result<Json<AuditList>, ApiError> {
     let (limit, cursor) = page.parse()?;

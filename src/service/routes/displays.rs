@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::service::auth::{Operator, OPERATOR};
+use crate::service::auth::{scope, Operator};
 use crate::service::crypto::{generate_token, token_hash};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
@@ -159,11 +159,11 @@ const TOKEN_PREFIX: &str = "ekd_";
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 422, description = "Invalid geometry, or one no job could run on within the memory limit; `field` names the problem", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["admin"]))
 )]
 pub async fn register_display(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Admin>,
     ApiJson(body): ApiJson<RegisterDisplay>,
 ) -> Result<(StatusCode, Json<DisplayWithToken>), ApiError> {
     let name = body.name.trim();
@@ -205,7 +205,13 @@ pub async fn register_display(
     let id = id_text(&Uuid::new_v4());
     let token = generate_token(TOKEN_PREFIX);
     let row = store::displays::insert(&state.writer, &id, name, &geometry_json, &token_hash(&token)).await?;
-    store::audit::record(&state.writer, OPERATOR, "display.register", &format!("displays/{id}")).await?;
+    store::audit::record(
+        &state.writer,
+        &op.actor(),
+        "display.register",
+        &format!("displays/{id}"),
+    )
+    .await?;
     Ok((
         StatusCode::CREATED,
         Json(DisplayWithToken {
@@ -224,11 +230,11 @@ pub async fn register_display(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such display", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "read-evaluation", "admin"]))
 )]
 pub async fn get_display(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadJobs>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<DisplayView>, ApiError> {
     let row = store::displays::get(&state.db, &id_text(&id))
@@ -245,11 +251,11 @@ pub async fn get_display(
         (status = 200, description = "A page of displays", body = DisplayList),
         (status = 401, description = "No or unknown token", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "read-evaluation", "admin"]))
 )]
 pub async fn list_displays(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadJobs>,
     ApiQuery(page): ApiQuery<PageQuery>,
 ) -> Result<Json<DisplayList>, ApiError> {
     let (limit, cursor) = page.parse()?;
@@ -269,11 +275,11 @@ pub async fn list_displays(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such display", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["admin"]))
 )]
 pub async fn rotate_token(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Admin>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<DisplayWithToken>, ApiError> {
     let id = id_text(&id);
@@ -283,7 +289,7 @@ pub async fn rotate_token(
         .ok_or(ApiError::NotFound("display"))?;
     store::audit::record(
         &state.writer,
-        OPERATOR,
+        &op.actor(),
         "display.rotate_token",
         &format!("displays/{id}"),
     )
@@ -303,17 +309,17 @@ pub async fn rotate_token(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such display", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["admin"]))
 )]
 pub async fn delete_display(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Admin>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
     if !store::displays::delete(&state.writer, &id).await? {
         return Err(ApiError::NotFound("display"));
     }
-    store::audit::record(&state.writer, OPERATOR, "display.delete", &format!("displays/{id}")).await?;
+    store::audit::record(&state.writer, &op.actor(), "display.delete", &format!("displays/{id}")).await?;
     Ok(StatusCode::NO_CONTENT)
 }

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::service::auth::{Operator, OPERATOR};
+use crate::service::auth::{scope, Operator};
 use crate::service::crypto::DataKey;
 use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
 use crate::service::images::{self, ImageProblem};
@@ -132,11 +132,11 @@ fn problem(p: ImageProblem) -> ApiError {
         (status = 415, description = "Not PNG or JPEG", body = ErrorBody),
         (status = 422, description = "Truncated, corrupt or mislabelled image", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn upload_document(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Submit>,
     headers: HeaderMap,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
@@ -193,7 +193,13 @@ pub async fn upload_document(
         },
     )
     .await?;
-    store::audit::record(&state.writer, OPERATOR, "document.upload", &format!("documents/{id}")).await?;
+    store::audit::record(
+        &state.writer,
+        &op.actor(),
+        "document.upload",
+        &format!("documents/{id}"),
+    )
+    .await?;
     Ok((StatusCode::CREATED, Json(DocumentView::from(&row))))
 }
 
@@ -206,11 +212,11 @@ pub async fn upload_document(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such document", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn get_document(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::Submit>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<DocumentView>, ApiError> {
     let row = store::documents::get(&state.db, &id_text(&id))
@@ -227,11 +233,11 @@ pub async fn get_document(
         (status = 200, description = "A page of documents", body = DocumentList),
         (status = 401, description = "No or unknown token", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn list_documents(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::Submit>,
     ApiQuery(page): ApiQuery<PageQuery>,
 ) -> Result<Json<DocumentList>, ApiError> {
     let (limit, cursor) = page.parse()?;
@@ -255,20 +261,26 @@ pub async fn list_documents(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such document", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn delete_document(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Submit>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
     let left = store::documents::delete(&state.writer, store::documents::Which::One(&id), store::now_ms())
         .await?
         .ok_or(ApiError::NotFound("document"))?;
-    store::audit::record(&state.writer, OPERATOR, "document.delete", &format!("documents/{id}")).await?;
+    store::audit::record(
+        &state.writer,
+        &op.actor(),
+        "document.delete",
+        &format!("documents/{id}"),
+    )
+    .await?;
     for job in &left.jobs {
-        store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{job}")).await?;
+        store::audit::record(&state.writer, &op.actor(), "job.delete", &format!("jobs/{job}")).await?;
     }
     crate::service::retention::finish_deletion(&state, &left.paths).await;
     Ok(StatusCode::NO_CONTENT)

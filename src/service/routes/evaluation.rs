@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::send_sealed;
-use crate::service::auth::Operator;
+use crate::service::auth::{scope, Operator};
 use crate::service::error::{ApiError, ApiPath, ErrorBody};
 use crate::service::jobs::bundle::is_plain_file_name;
 use crate::service::sealed;
@@ -56,11 +56,11 @@ async fn succeeded(state: &AppState, id: &Uuid) -> Result<JobRow, ApiError> {
         (status = 404, description = "No such job", body = ErrorBody),
         (status = 409, description = "The job has not succeeded", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["read-evaluation", "admin"]))
 )]
 pub async fn get_evaluation(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadEvaluation>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
     let job = succeeded(&state, &id).await?;
@@ -85,11 +85,11 @@ pub async fn get_evaluation(
         (status = 404, description = "No such job", body = ErrorBody),
         (status = 409, description = "The job has not succeeded", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["read-evaluation", "admin"]))
 )]
 pub async fn list_views(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadEvaluation>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<ViewList>, ApiError> {
     let job = succeeded(&state, &id).await?;
@@ -123,11 +123,11 @@ pub async fn list_views(
         (status = 404, description = "No such job or view", body = ErrorBody),
         (status = 409, description = "The job has not succeeded", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["read-evaluation", "admin"]))
 )]
 pub async fn get_view(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadEvaluation>,
     ApiPath((id, name)): ApiPath<(Uuid, String)>,
 ) -> Result<Response, ApiError> {
     if !is_plain_file_name(&name) || !name.ends_with(".png") {

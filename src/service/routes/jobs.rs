@@ -20,7 +20,7 @@ use uuid::Uuid;
 
 use super::displays::{resolvability_warnings, stored_geometry};
 use super::{id_text, next_cursor, PageQuery};
-use crate::service::auth::{Operator, OPERATOR};
+use crate::service::auth::{scope, Operator};
 use crate::service::crypto::{DataKey, MasterKey};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::jobs::bundle::BundleFile;
@@ -259,11 +259,11 @@ fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
         (status = 409, description = "The key was used with a different body", body = ErrorBody),
         (status = 422, description = "A referenced resource does not exist, or bad options", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn create_job(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Submit>,
     headers: HeaderMap,
     ApiJson(body): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
@@ -304,7 +304,7 @@ pub async fn create_job(
         data_key,
         sealed_options,
     };
-    let (status, row) = enqueue(&state, &new).await?;
+    let (status, row) = enqueue(&state, &op.actor(), &new).await?;
     let mut response = (status, Json(JobView::new(&state.master_key, &row, warnings)?)).into_response();
     if let Ok(location) = HeaderValue::from_str(&format!("/v1/jobs/{}", row.id)) {
         response.headers_mut().insert(header::LOCATION, location);
@@ -389,10 +389,10 @@ async fn resolve_inputs(
 /// Enqueues a job, or finds the one this idempotency key already created: `201` and the new job (audited,
 /// published and handed to a worker), `200` and the existing one, or a conflict when the key was used
 /// for a different request.
-async fn enqueue(state: &AppState, new: &NewJob) -> Result<(StatusCode, JobRow), ApiError> {
+async fn enqueue(state: &AppState, actor: &str, new: &NewJob) -> Result<(StatusCode, JobRow), ApiError> {
     match store::jobs::enqueue(&state.writer, new).await? {
         Enqueued::Created(row) => {
-            store::audit::record(&state.writer, OPERATOR, "job.create", &format!("jobs/{}", row.id)).await?;
+            store::audit::record(&state.writer, actor, "job.create", &format!("jobs/{}", row.id)).await?;
             state.publish(&row);
             state.job_queued.notify_one();
             Ok((StatusCode::CREATED, row))
@@ -427,11 +427,11 @@ async fn load(state: &AppState, id: &Uuid) -> Result<JobRow, ApiError> {
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such job", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "read-evaluation", "admin"]))
 )]
 pub async fn get_job(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadJobs>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<JobView>, ApiError> {
     let row = load(&state, &id).await?;
@@ -448,11 +448,11 @@ pub async fn get_job(
         (status = 400, description = "Unknown state", body = ErrorBody),
         (status = 401, description = "No or unknown token", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "read-evaluation", "admin"]))
 )]
 pub async fn list_jobs(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadJobs>,
     ApiQuery(q): ApiQuery<JobListQuery>,
 ) -> Result<Json<JobList>, ApiError> {
     let (limit, cursor) = PageQuery {
@@ -494,11 +494,11 @@ pub async fn list_jobs(
         (status = 404, description = "No such job", body = ErrorBody),
         (status = 409, description = "Already succeeded or failed", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn cancel_job(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Submit>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<(StatusCode, Json<JobView>), ApiError> {
     let row = store::jobs::request_cancel(&state.writer, JobId::from(id))
@@ -514,7 +514,7 @@ pub async fn cancel_job(
             })
         }
     };
-    store::audit::record(&state.writer, OPERATOR, "job.cancel", &format!("jobs/{}", row.id)).await?;
+    store::audit::record(&state.writer, &op.actor(), "job.cancel", &format!("jobs/{}", row.id)).await?;
     state.publish(&row);
     let warnings = display_warnings(&state, &row.display_id).await?;
     Ok((status, Json(JobView::new(&state.master_key, &row, warnings)?)))
@@ -533,11 +533,11 @@ pub async fn cancel_job(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such job", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "admin"]))
 )]
 pub async fn delete_job(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Submit>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let row = load(&state, &id).await?;
@@ -547,7 +547,7 @@ pub async fn delete_job(
     if purged.jobs.is_empty() {
         return Err(ApiError::NotFound("job"));
     }
-    store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{id}")).await?;
+    store::audit::record(&state.writer, &op.actor(), "job.delete", &format!("jobs/{id}")).await?;
     // Wakes the job's event streams, which then find it gone and end.
     state.publish(&row);
     crate::service::retention::finish_deletion(&state, &purged.paths).await;
@@ -566,11 +566,11 @@ pub async fn delete_job(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such job", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["submit", "read-evaluation", "admin"]))
 )]
 pub async fn job_events(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::ReadJobs>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, ApiError> {
     let row = load(&state, &id).await?;

@@ -63,9 +63,12 @@ pub fn recorder() -> PrometheusHandle {
         (status = 200, description = "Prometheus text format", content_type = "text/plain", body = String),
         (status = 401, description = "No or unknown token", body = crate::service::error::ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["admin"]))
 )]
-pub async fn scrape(State(state): State<AppState>, _: crate::service::auth::Operator) -> Result<Response, ApiError> {
+pub async fn scrape(
+    State(state): State<AppState>,
+    _: crate::service::auth::Operator<crate::service::auth::scope::Admin>,
+) -> Result<Response, ApiError> {
     let counts = store::jobs::count_by_state(&state.db).await?;
     for (s, n) in &counts {
         metrics::gauge!("eyekey_jobs", "state" => s.as_str()).set(*n as f64);

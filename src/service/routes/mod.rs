@@ -9,6 +9,7 @@ pub mod health;
 pub mod jobs;
 pub mod metrics;
 pub mod profiles;
+pub mod tokens;
 
 use axum::body::Body;
 use axum::http::{header, HeaderValue};
@@ -35,6 +36,7 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
         .merge(evaluation::router())
         .merge(frames::router())
         .merge(audit::router())
+        .merge(tokens::router())
 }
 
 /// `?limit=&cursor=` of a listing.

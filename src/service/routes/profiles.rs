@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
-use crate::service::auth::{Operator, OPERATOR};
+use crate::service::auth::{scope, Operator};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
 use crate::service::store::{self, profiles::ProfileRow, to_time};
@@ -139,17 +139,17 @@ fn detail(row: &ProfileRow, version: i64, profile: VisionProfile) -> ProfileDeta
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 422, description = "Invalid profile; `field` names the problem", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["enrol", "admin"]))
 )]
 pub async fn enrol_profile(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Enrol>,
     ApiJson(body): ApiJson<EnrolProfile>,
 ) -> Result<(StatusCode, Json<ProfileDetail>), ApiError> {
     let plain = check(&body)?;
     let id = id_text(&Uuid::new_v4());
     let row = store::profiles::insert(&state.writer, &state.master_key, &id, body.label.as_deref(), &plain).await?;
-    store::audit::record(&state.writer, OPERATOR, "profile.enrol", &format!("profiles/{id}")).await?;
+    store::audit::record(&state.writer, &op.actor(), "profile.enrol", &format!("profiles/{id}")).await?;
     Ok((StatusCode::CREATED, Json(detail(&row, 1, body.profile))))
 }
 
@@ -162,11 +162,11 @@ pub async fn enrol_profile(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such profile or version", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["enrol", "admin"]))
 )]
 pub async fn get_profile(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::Enrol>,
     ApiPath(id): ApiPath<Uuid>,
     ApiQuery(q): ApiQuery<VersionQuery>,
 ) -> Result<Json<ProfileDetail>, ApiError> {
@@ -192,11 +192,11 @@ pub async fn get_profile(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 422, description = "Bad limit or cursor", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["enrol", "admin"]))
 )]
 pub async fn list_profiles(
     State(state): State<AppState>,
-    _: Operator,
+    _op: Operator<scope::Enrol>,
     ApiQuery(page): ApiQuery<PageQuery>,
 ) -> Result<Json<ProfileList>, ApiError> {
     let (limit, cursor) = page.parse()?;
@@ -220,11 +220,11 @@ pub async fn list_profiles(
         (status = 404, description = "No such profile", body = ErrorBody),
         (status = 422, description = "Invalid profile", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["enrol", "admin"]))
 )]
 pub async fn reenrol_profile(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Enrol>,
     ApiPath(id): ApiPath<Uuid>,
     ApiJson(body): ApiJson<EnrolProfile>,
 ) -> Result<Json<ProfileDetail>, ApiError> {
@@ -235,7 +235,7 @@ pub async fn reenrol_profile(
         .ok_or(ApiError::NotFound("profile"))?;
     store::audit::record(
         &state.writer,
-        OPERATOR,
+        &op.actor(),
         "profile.reenrol",
         &format!("profiles/{id}/versions/{}", row.current_version),
     )
@@ -257,20 +257,20 @@ pub async fn reenrol_profile(
         (status = 401, description = "No or unknown token", body = ErrorBody),
         (status = 404, description = "No such profile", body = ErrorBody),
     ),
-    security(("operator" = []))
+    security(("operator" = ["enrol", "admin"]))
 )]
 pub async fn delete_profile(
     State(state): State<AppState>,
-    _: Operator,
+    op: Operator<scope::Enrol>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<StatusCode, ApiError> {
     let id = id_text(&id);
     let purged = store::profiles::delete(&state.writer, &id)
         .await?
         .ok_or(ApiError::NotFound("profile"))?;
-    store::audit::record(&state.writer, OPERATOR, "profile.delete", &format!("profiles/{id}")).await?;
+    store::audit::record(&state.writer, &op.actor(), "profile.delete", &format!("profiles/{id}")).await?;
     for job in &purged.jobs {
-        store::audit::record(&state.writer, OPERATOR, "job.delete", &format!("jobs/{job}")).await?;
+        store::audit::record(&state.writer, &op.actor(), "job.delete", &format!("jobs/{job}")).await?;
     }
     crate::service::retention::finish_deletion(&state, &purged.paths).await;
     Ok(StatusCode::NO_CONTENT)

@@ -8,6 +8,7 @@ pub mod documents;
 pub mod ids;
 pub mod jobs;
 pub mod profiles;
+pub mod tokens;
 
 use std::path::Path;
 use std::str::FromStr as _;
