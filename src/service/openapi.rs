@@ -58,7 +58,7 @@ use super::routes;
         routes::tokens::list_tokens,
         routes::tokens::revoke_token,
     ),
-    modifiers(&BearerSchemes),
+    modifiers(&BearerSchemes, &CommonResponses),
     tags(
         (name = "profiles", description = "Enrolled vision profiles (operator)"),
         (name = "displays", description = "Registered light-field displays (operator)"),
@@ -89,6 +89,65 @@ impl Modify for BearerSchemes {
         let mut display = Http::new(HttpAuthScheme::Bearer);
         display.description = Some("A display's access token, shown once at registration or rotation".into());
         components.add_security_scheme("display", SecurityScheme::Http(display));
+    }
+}
+
+/// The error statuses any operation can answer besides its own: a malformed path, query or body (400), a
+/// token of the wrong role or scope (403), a body over its limit (413), a body of the wrong type (415), a field
+/// out of range (422), an internal error (500), not ready or a read-only data directory (503), and a full
+/// data directory (507). Each operation's own list is kept; these are added where it does not name them, so a
+/// client generated from the document knows every status it can meet.
+struct CommonResponses;
+
+impl Modify for CommonResponses {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::{ContentBuilder, Ref, ResponseBuilder};
+        let common: [(&str, &str, bool); 8] = [
+            ("400", "Malformed path, query or body", true),
+            ("403", "The token's role or scopes do not allow this", true),
+            ("413", "The body exceeds its limit", false),
+            ("415", "The body's content type is not accepted", false),
+            (
+                "422",
+                "A field is out of range or refers to nothing; `field` names it",
+                true,
+            ),
+            ("500", "Internal error (logged; the body says no more)", true),
+            (
+                "503",
+                "Not ready, shutting down, or the data directory is read-only",
+                true,
+            ),
+            ("507", "The data directory is full; nothing was stored", false),
+        ];
+        for item in openapi.paths.paths.values_mut() {
+            let ops = [
+                item.get.as_mut(),
+                item.put.as_mut(),
+                item.post.as_mut(),
+                item.delete.as_mut(),
+                item.patch.as_mut(),
+            ];
+            for op in ops.into_iter().flatten() {
+                let has_body = op.request_body.is_some();
+                let writes = has_body || op.operation_id.as_deref().is_some_and(|id| id.starts_with("delete"));
+                for (code, description, always) in common {
+                    let applies = always || (code == "507" && writes) || (code != "507" && has_body);
+                    if applies && !op.responses.responses.contains_key(code) {
+                        let response = ResponseBuilder::new()
+                            .description(description)
+                            .content(
+                                "application/json",
+                                ContentBuilder::new()
+                                    .schema(Some(Ref::from_schema_name("ErrorBody")))
+                                    .build(),
+                            )
+                            .build();
+                        op.responses.responses.insert(code.to_string(), response.into());
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -66,3 +66,50 @@ async fn the_served_document_equals_the_generated_one_and_the_docs_ui_is_served(
         "Swagger UI is served from the binary"
     );
 }
+
+/// The schemas state the ranges the handlers enforce, and every operation lists the error statuses it can
+/// answer, so a client generated from the document sends requests the service accepts.
+#[test]
+fn the_schemas_state_the_constraints_the_handlers_enforce() {
+    let doc: serde_json::Value = serde_json::from_str(&document_json()).unwrap();
+    let schemas = &doc["components"]["schemas"];
+    let profile = &schemas["VisionProfile"]["properties"];
+    assert_eq!(
+        (
+            profile["pupil_diameter_mm"]["minimum"].as_f64(),
+            profile["pupil_diameter_mm"]["maximum"].as_f64()
+        ),
+        (Some(2.0), Some(9.0))
+    );
+    assert_eq!(profile["zernike_um"]["maxItems"], 66);
+    let display = &schemas["DisplayGeometry"]["properties"];
+    assert_eq!(
+        (
+            display["views_u"]["minimum"].as_f64(),
+            display["views_u"]["maximum"].as_f64()
+        ),
+        (Some(1.0), Some(32.0))
+    );
+    let options = &schemas["EncodeOptions"]["properties"];
+    assert_eq!(options["population_decoys"]["maximum"].as_f64(), Some(64.0));
+    assert_eq!(options["max_iterations"]["maximum"].as_f64(), Some(20000.0));
+    let list = &doc["paths"]["/v1/jobs"]["get"]["parameters"];
+    let limit = list.as_array().unwrap().iter().find(|p| p["name"] == "limit").unwrap();
+    assert_eq!(
+        (limit["schema"]["minimum"].as_f64(), limit["schema"]["maximum"].as_f64()),
+        (Some(1.0), Some(200.0))
+    );
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            let responses = op["responses"].as_object().unwrap();
+            for code in ["400", "403", "500", "503"] {
+                assert!(responses.contains_key(code), "{method} {path} does not document {code}");
+            }
+            if op.get("requestBody").is_some() {
+                for code in ["413", "415", "422", "507"] {
+                    assert!(responses.contains_key(code), "{method} {path} does not document {code}");
+                }
+            }
+        }
+    }
+}

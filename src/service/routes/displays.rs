@@ -51,6 +51,7 @@ pub enum Preset {
 #[serde(deny_unknown_fields)]
 pub struct RegisterDisplay {
     /// Operator's name for the display (1–200 characters).
+    #[schema(min_length = 1, max_length = 200)]
     pub name: String,
     /// A built-in design (give this or `geometry`).
     pub preset: Option<Preset>,

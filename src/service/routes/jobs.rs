@@ -59,6 +59,7 @@ pub struct CreateJob {
     pub options: Option<EncodeOptions>,
     /// Enrolled people who must not read it (representative observers), at most 16.
     #[serde(default)]
+    #[schema(max_items = 16)]
     pub observer_profile_ids: Vec<Uuid>,
     /// An image to show everybody else instead (same aspect ratio as the document).
     #[serde(default)]
@@ -143,8 +144,10 @@ pub struct JobListQuery {
     /// Only jobs for this display.
     pub display_id: Option<Uuid>,
     /// Items per page (1–200, default 50).
+    #[param(minimum = 1, maximum = 200)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page.
+    /// `next_cursor` of the previous page, as the service returned it (opaque).
+    #[param(pattern = "^[A-Za-z0-9_-]{1,200}$")]
     pub cursor: Option<String>,
 }
 

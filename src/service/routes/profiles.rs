@@ -30,6 +30,7 @@ pub fn router() -> Router<AppState> {
 #[serde(deny_unknown_fields)]
 pub struct EnrolProfile {
     /// Operator's label (not secret; at most 200 characters). On re-enrolment, omitted keeps the old one.
+    #[schema(max_length = 200)]
     pub label: Option<String>,
     /// The person's vision profile.
     pub profile: VisionProfile,
@@ -41,6 +42,7 @@ pub struct ProfileMeta {
     /// Id.
     pub id: Uuid,
     /// Operator's label.
+    #[schema(max_length = 200)]
     pub label: Option<String>,
     /// Current version (1 on enrolment, +1 per re-enrolment).
     pub version: i64,
@@ -56,6 +58,7 @@ pub struct ProfileDetail {
     /// Id.
     pub id: Uuid,
     /// Operator's label.
+    #[schema(max_length = 200)]
     pub label: Option<String>,
     /// The version shown.
     pub version: i64,

@@ -105,6 +105,9 @@ pub async fn create_token(
     if name == OPERATOR {
         return Err(ApiError::invalid("name", "`operator` is the bootstrap token's name"));
     }
+    if body.scopes.len() > 4 {
+        return Err(ApiError::invalid("scopes", "at most 4 scopes"));
+    }
     let mut scopes = body.scopes.clone();
     scopes.sort_by_key(|s| s.as_str());
     scopes.dedup();

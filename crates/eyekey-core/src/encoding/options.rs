@@ -63,6 +63,7 @@ pub struct EncodeOptions {
     /// Optional ablation.
     pub ablation: Option<Ablation>,
     /// Decoy observers sampled from the population, each shown a decoy (0 = only the given observers).
+    #[cfg_attr(feature = "openapi", schema(maximum = 64))]
     pub population_decoys: u32,
     /// Population decoys look through the target's pupil: a sampled person whose pupil is larger than the
     /// target's is given the target's (their wavefront rescaled to it, ANSI Z80.28 Annex B), so the decoys
@@ -71,46 +72,61 @@ pub struct EncodeOptions {
     /// What decoy observers see.
     pub decoy: DecoyKind,
     /// Weight of each decoy observer's term relative to the target's (1.0).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 100.0))]
     pub decoy_weight: f64,
     /// Weight of the leak penalty on every decoy (docs/design.md §3, "Leak penalty"): the squared projections of
     /// the decoy's view onto the document's ink-box pattern (plain and blurred) and, with `document_text`, onto
     /// each secret character's glyph discriminant at ±1 px, relative to the target's term (0 = off). With
     /// `decoy_weight` 0 the decoys are asked only not to see the document, not to see noise.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 100.0))]
     pub leak_weight: f64,
     /// Seed for population sampling, jitter and noise decoys.
     pub seed: u64,
     /// Sub-rays traced per light-field sample (S).
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 256))]
     pub sub_rays: u32,
     /// Solver iteration cap.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 20000))]
     pub max_iterations: u32,
     /// Relative objective change below which the solver stops.
+    #[cfg_attr(feature = "openapi", schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0))]
     pub tolerance: f64,
     /// λ_W of Eq. 16 (difference maximisation), relative to the data term.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 100.0))]
     pub lambda_w: f64,
     /// λ_c of Eq. 16 (difference maximisation), relative to the data term.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 100.0))]
     pub lambda_c: f64,
     /// People sampled from the population for the evaluation report (0 skips it).
+    #[cfg_attr(feature = "openapi", schema(maximum = 2000))]
     pub evaluation_population: u32,
     /// Head-movement robustness: besides the design position, the target must also read from four eye
     /// positions this far off axis (mm; 0 = only the design position). Stacked observers, as in the
     /// 2014 eyeglasses-free display.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 20.0))]
     pub head_radius_mm: f64,
     /// Eye positions on the head-movement ring, evenly spaced from the right (4 = right, left, up, down).
+    #[cfg_attr(feature = "openapi", schema(minimum = 3, maximum = 16))]
     pub head_positions: u32,
     /// Adaptive decoy rounds: after each solve, sample `adaptive_candidates` fresh people and add up to
     /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
+    #[cfg_attr(feature = "openapi", schema(maximum = 5))]
     pub adaptive_rounds: u32,
     /// People sampled per adaptive round.
+    #[cfg_attr(feature = "openapi", schema(maximum = 200))]
     pub adaptive_candidates: u32,
     /// Decoys added per adaptive round at most.
+    #[cfg_attr(feature = "openapi", schema(maximum = 16))]
     pub adaptive_per_round: u32,
     /// Camera decoys: an ideal lens of `camera_decoy_aperture_mm` focused at each of `camera_decoy_focus_d`
     /// behind a filter passing one projector band (the evaluation's strongest attacker), each shown a noise mask
     /// (and held to the leak penalty).
     pub camera_decoys: bool,
     /// Focus settings of the camera decoys, dioptres off the display (at most 9, each within ±5 D).
+    #[cfg_attr(feature = "openapi", schema(max_items = 9))]
     pub camera_decoy_focus_d: Vec<f64>,
     /// Aperture of the camera decoys' lens, mm (2–10).
+    #[cfg_attr(feature = "openapi", schema(minimum = 2.0, maximum = 10.0))]
     pub camera_decoy_aperture_mm: f64,
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the plain document, at most 3 times. The target's

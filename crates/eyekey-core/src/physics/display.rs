@@ -80,28 +80,38 @@ pub struct DisplayGeometry {
     /// Pinhole barrier or lenslet array (default: pinhole).
     #[serde(default)]
     pub aperture: Aperture,
-    /// Holes across (X).
+    /// Holes across (X), 1–1024.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 1024))]
     pub holes_x: u32,
-    /// Holes down (Y).
+    /// Holes down (Y), 1–1024.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 1024))]
     pub holes_y: u32,
-    /// Centre-to-centre distance of the holes, mm.
+    /// Centre-to-centre distance of the holes, mm (0.01–10).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.01, maximum = 10.0))]
     pub hole_pitch_mm: f64,
-    /// Diameter of each (circular) hole, mm.
+    /// Diameter of each (circular) hole, mm (0.001–10, at most the pitch).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.001, maximum = 10.0))]
     pub hole_diameter_mm: f64,
-    /// Screen pixels behind each hole, horizontally (U).
+    /// Screen pixels behind each hole, horizontally (U), 1–32.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 32))]
     pub views_u: u32,
-    /// Screen pixels behind each hole, vertically (V).
+    /// Screen pixels behind each hole, vertically (V), 1–32.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 32))]
     pub views_v: u32,
-    /// Screen pixel pitch, mm (U·p_s ≤ p_h).
+    /// Screen pixel pitch, mm (0.001–10, with U·p_s ≤ p_h).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.001, maximum = 10.0))]
     pub screen_pixel_pitch_mm: f64,
-    /// Distance from the screen to the barrier, mm.
+    /// Distance from the screen to the barrier, mm (0.1–1000).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.1, maximum = 1000.0))]
     pub gap_mm: f64,
-    /// Design viewing distance from the barrier to the pupil, mm.
+    /// Design viewing distance from the barrier to the pupil, mm (50–10000).
+    #[cfg_attr(feature = "openapi", schema(minimum = 50.0, maximum = 10000.0))]
     pub viewing_distance_mm: f64,
     /// One spectral power distribution per projector (band).
-    #[cfg_attr(feature = "openapi", schema(value_type = Vec<Object>))]
+    #[cfg_attr(feature = "openapi", schema(value_type = Vec<Object>, min_items = 1))]
     pub projectors: Vec<ProjectorSpectrum>,
-    /// Largest light-field value a projector pixel can emit (Eq. 15); frames store L / L_max.
+    /// Largest light-field value a projector pixel can emit (Eq. 15), 10⁻⁶–10⁶; frames store L / L_max.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.000001, maximum = 1000000.0))]
     pub l_max: f64,
 }
 

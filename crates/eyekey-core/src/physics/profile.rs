@@ -35,11 +35,16 @@ pub const MAX_COEFFICIENT_UM: f64 = 20.0;
 #[serde(deny_unknown_fields)]
 pub struct VisionProfile {
     /// Entrance-pupil diameter while viewing the display, mm (2–9).
+    #[cfg_attr(feature = "openapi", schema(minimum = 2.0, maximum = 9.0))]
     pub pupil_diameter_mm: f64,
-    /// OSA/ANSI Zernike coefficients, µm, index j = (n(n+2)+m)/2, stated for `zernike_pupil_diameter_mm`.
+    /// OSA/ANSI Zernike coefficients, µm, index j = (n(n+2)+m)/2, stated for `zernike_pupil_diameter_mm`; at
+    /// most 66 terms (order 10), each within ±20 µm.
+    #[cfg_attr(feature = "openapi", schema(max_items = 66, value_type = Vec<ZernikeTerm>))]
     pub zernike_um: Vec<f64>,
-    /// Pupil diameter the coefficients were measured at, mm; defaults to `pupil_diameter_mm`.
+    /// Pupil diameter the coefficients were measured at, mm (2–10, at least `pupil_diameter_mm`); defaults to
+    /// `pupil_diameter_mm`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 2.0, maximum = 10.0))]
     pub zernike_pupil_diameter_mm: Option<f64>,
     /// Refractive error in prescription form (sphere/cylinder/axis, as an optometrist writes it), not
     /// corrected while viewing: its C(2,0) and C(2,±2) add to the Zernike terms.
@@ -53,8 +58,31 @@ pub struct VisionProfile {
     /// Wavelength the aberrations were measured at, nm (400–1000); defaults to 555. Under wave optics each band
     /// adds the eye's chromatic defocus relative to it (Thibos et al. 1992).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 400.0, maximum = 1000.0))]
     pub reference_wavelength_nm: Option<f64>,
 }
+
+/// One Zernike coefficient, µm (the schema of an item of `zernike_um`).
+#[cfg(feature = "openapi")]
+pub struct ZernikeTerm(pub f64);
+
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for ZernikeTerm {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::Number)
+            .format(Some(utoipa::openapi::SchemaFormat::KnownFormat(
+                utoipa::openapi::KnownFormat::Double,
+            )))
+            .minimum(Some(-MAX_COEFFICIENT_UM))
+            .maximum(Some(MAX_COEFFICIENT_UM))
+            .description(Some("A Zernike coefficient, µm"))
+            .into()
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for ZernikeTerm {}
 
 impl VisionProfile {
     /// A perfect eye with the standard observer's cones and a 6 mm pupil.
