@@ -63,7 +63,16 @@ pub async fn purge_expired(state: &AppState, now_ms: i64) -> anyhow::Result<(usi
     let mut tx = state.writer.0.begin().await?;
     let jobs = store::jobs::purge(&mut tx, store::jobs::JobSet::CreatedBefore(cutoff), "expired", now_ms).await?;
     tx.commit().await?;
-    let n_docs = docs.documents;
+    let n_docs = docs.documents.len();
+    for doc in &docs.documents {
+        store::audit::record(
+            &state.writer,
+            "retention",
+            "document.expire",
+            &format!("documents/{doc}"),
+        )
+        .await?;
+    }
     let expired_jobs = docs.jobs.len() + jobs.jobs.len();
     for job in docs.jobs.iter().chain(&jobs.jobs) {
         store::audit::record(&state.writer, "retention", "job.expire", &format!("jobs/{job}")).await?;

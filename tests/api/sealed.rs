@@ -398,6 +398,12 @@ async fn documents_and_jobs_expire_after_the_retention_period_and_profiles_do_no
         .unwrap()
         .iter()
         .any(|e| e["action"] == "job.expire" && e["actor"] == "retention"));
+    let expired = format!("documents/{}", f.document_id);
+    assert!(audit["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|e| e["action"] == "document.expire" && e["resource"] == expired.as_str()));
 
     let keep = spawn_app_with(|c| c.retention = None).await;
     let g = keep.fixtures().await;

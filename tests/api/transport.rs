@@ -36,7 +36,7 @@ async fn over_tls_the_display_client_trusts_the_servers_ca_and_nothing_else_gets
     let pem = tempfile::tempdir().unwrap();
     let (ca, cert, key) = certificates(pem.path());
     let data = tempfile::tempdir().unwrap();
-    let app = spawn_app_in(data.path(), |c| {
+    let mut app = spawn_app_in(data.path(), |c| {
         c.tls = Some((cert.clone(), key.clone()));
         c.workers = 1;
     })
@@ -62,72 +62,13 @@ async fn over_tls_the_display_client_trusts_the_servers_ca_and_nothing_else_gets
         "no plain HTTP on the TLS port"
     );
 
-    // The display client, given the CA with --ca, installs a real bundle over TLS.
-    let f = {
-        let profile = trusting
-            .post(app.url("/v1/profiles"))
-            .bearer_auth(OPERATOR_TOKEN)
-            .json(&serde_json::json!({ "profile": crate::helpers::myope() }))
-            .send()
-            .await
-            .unwrap();
-        let profile = expect_json(profile, StatusCode::CREATED).await["id"]
-            .as_str()
-            .unwrap()
-            .to_string();
-        let display = trusting
-            .post(app.url("/v1/displays"))
-            .bearer_auth(OPERATOR_TOKEN)
-            .json(&serde_json::json!({ "name": "tls", "geometry": crate::helpers::tiny_display() }))
-            .send()
-            .await
-            .unwrap();
-        let display = expect_json(display, StatusCode::CREATED).await;
-        let document = trusting
-            .post(app.url("/v1/documents"))
-            .bearer_auth(OPERATOR_TOKEN)
-            .header("content-type", "image/png")
-            .body(document_png(24, 24))
-            .send()
-            .await
-            .unwrap();
-        let document = expect_json(document, StatusCode::CREATED).await["id"]
-            .as_str()
-            .unwrap()
-            .to_string();
-        crate::helpers::Fixtures {
-            profile_id: profile,
-            display_id: display["display"]["id"].as_str().unwrap().to_string(),
-            display_token: display["token"].as_str().unwrap().to_string(),
-            document_id: document,
-        }
-    };
-    let job = trusting
-        .post(app.url("/v1/jobs"))
-        .bearer_auth(OPERATOR_TOKEN)
-        .json(&crate::helpers::job_body(&f))
-        .send()
-        .await
-        .unwrap();
-    let id = expect_json(job, StatusCode::CREATED).await["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let r = trusting
-            .get(app.url(&format!("/v1/jobs/{id}")))
-            .bearer_auth(OPERATOR_TOKEN)
-            .send()
-            .await
-            .unwrap();
-        let job = expect_json(r, StatusCode::OK).await;
-        if job["state"] == "succeeded" {
-            break;
-        }
-        assert!(job["state"] != "failed" && Instant::now() < deadline, "{job}");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
+    // The display client, given the CA with --ca, installs a real bundle over TLS (the test's own requests
+    // go through the trusting client too).
+    app.client = trusting;
+    let f = app.fixtures().await;
+    let id = app.create_job(&f).await["id"].as_str().unwrap().to_string();
+    let job = app.wait_for_terminal(&id, Duration::from_secs(120)).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
     let out = tempfile::tempdir().unwrap();
     let cfg = ClientConfig::with_transport(&app.address, &f.display_token, out.path(), Some(&ca), false).unwrap();
     assert!(matches!(sync_once(&cfg).await.unwrap(), SyncOutcome::Installed { .. }));

@@ -122,7 +122,7 @@ pub struct Leftovers {
     /// Jobs that were deleted.
     pub jobs: Vec<String>,
     /// Documents that were deleted.
-    pub documents: usize,
+    pub documents: Vec<String>,
 }
 
 /// Deletes documents (one by id, or every one created before a time): the row stays as a tombstone
@@ -159,7 +159,7 @@ pub async fn delete(writer: &Writer, which: Which<'_>, now: i64) -> Result<Optio
         )
         .await?;
         left.paths.push(path);
-        left.documents += 1;
+        left.documents.push(id.clone());
         left.paths.extend(jobs.paths);
         left.jobs.extend(jobs.jobs);
     }

@@ -108,7 +108,7 @@ pub struct DisplayGeometry {
     #[cfg_attr(feature = "openapi", schema(minimum = 50.0, maximum = 10000.0))]
     pub viewing_distance_mm: f64,
     /// One spectral power distribution per projector (band).
-    #[cfg_attr(feature = "openapi", schema(value_type = Vec<Object>, min_items = 1))]
+    #[cfg_attr(feature = "openapi", schema(min_items = 1))]
     pub projectors: Vec<ProjectorSpectrum>,
     /// Largest light-field value a projector pixel can emit (Eq. 15), 10⁻⁶–10⁶; frames store L / L_max.
     #[cfg_attr(feature = "openapi", schema(minimum = 0.000001, maximum = 1000000.0))]

@@ -49,11 +49,9 @@ pub struct VisionProfile {
     /// Refractive error in prescription form (sphere/cylinder/axis, as an optometrist writes it), not
     /// corrected while viewing: its C(2,0) and C(2,±2) add to the Zernike terms.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[cfg_attr(feature = "openapi", schema(value_type = Option<Object>))]
     pub prescription: Option<Prescription>,
     /// Cone spectral sensitivities.
     #[serde(default)]
-    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub spectral: SpectralSensitivity,
     /// Wavelength the aberrations were measured at, nm (400–1000); defaults to 555. Under wave optics each band
     /// adds the eye's chromatic defocus relative to it (Thibos et al. 1992).

@@ -648,13 +648,17 @@ impl ZernikeCoefficients {
 /// Minus- and plus-cylinder forms are both accepted; axis in [0, 180], 180 meaning 0.
 /// Deserialisation validates (see [`Prescription::validate`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(try_from = "UncheckedPrescription")]
 pub struct Prescription {
-    /// Sphere in dioptres (negative for myopia).
+    /// Sphere in dioptres (negative for myopia), ±20.
+    #[cfg_attr(feature = "openapi", schema(minimum = -20.0, maximum = 20.0))]
     pub sphere_d: f64,
-    /// Cylinder in dioptres, either sign.
+    /// Cylinder in dioptres, either sign, ±10.
+    #[cfg_attr(feature = "openapi", schema(minimum = -10.0, maximum = 10.0))]
     pub cylinder_d: f64,
     /// Cylinder axis in degrees, 0..=180.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 180.0))]
     pub axis_deg: f64,
 }
 

@@ -15,32 +15,43 @@ use serde::{Deserialize, Serialize};
 /// In JSON every field is optional (missing fields take the default) and unknown fields are
 /// rejected.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(default, deny_unknown_fields)]
 pub struct ObserverParameters {
     /// Age in years; drives the ocular-media (lens) density, CIE 170-1 §5.
+    #[cfg_attr(feature = "openapi", schema(minimum = 10.0, maximum = 90.0))]
     pub age_years: f64,
     /// Angular diameter of the viewing field in degrees; drives the photopigment and macular
     /// densities.
+    #[cfg_attr(feature = "openapi", schema(minimum = 1.0, maximum = 10.0))]
     pub field_size_deg: f64,
     /// Deviation of the ocular-media density, in % of its age-dependent value: D_ocul · (1 +
     /// v/100).
+    #[cfg_attr(feature = "openapi", schema(minimum = -100.0, maximum = 300.0))]
     pub od_lens_pct: f64,
     /// Deviation of the peak macular pigment density, in %: D_mac,max · (1 + v/100).
+    #[cfg_attr(feature = "openapi", schema(minimum = -100.0, maximum = 300.0))]
     pub od_macula_pct: f64,
     /// Deviation of the L photopigment peak optical density, in %: D_max,L · (1 + v/100).
+    #[cfg_attr(feature = "openapi", schema(minimum = -100.0, maximum = 300.0))]
     pub od_l_pct: f64,
     /// Deviation of the M photopigment peak optical density, in %: D_max,M · (1 + v/100).
+    #[cfg_attr(feature = "openapi", schema(minimum = -100.0, maximum = 300.0))]
     pub od_m_pct: f64,
     /// Deviation of the S photopigment peak optical density, in %: D_max,S · (1 + v/100).
+    #[cfg_attr(feature = "openapi", schema(minimum = -100.0, maximum = 300.0))]
     pub od_s_pct: f64,
     /// Shift of the L absorbance spectrum along the wavelength axis in nm (positive = longer
     /// wavelengths).
+    #[cfg_attr(feature = "openapi", schema(minimum = -15.0, maximum = 15.0))]
     pub shift_l_nm: f64,
     /// Shift of the M absorbance spectrum along the wavelength axis in nm (positive = longer
     /// wavelengths).
+    #[cfg_attr(feature = "openapi", schema(minimum = -15.0, maximum = 15.0))]
     pub shift_m_nm: f64,
     /// Shift of the S absorbance spectrum along the wavelength axis in nm (positive = longer
     /// wavelengths).
+    #[cfg_attr(feature = "openapi", schema(minimum = -15.0, maximum = 15.0))]
     pub shift_s_nm: f64,
 }
 

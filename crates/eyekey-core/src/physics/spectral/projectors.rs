@@ -15,20 +15,25 @@ use serde::{Deserialize, Serialize};
 /// JSON: `{"kind": "gaussian", "centre_nm": 450, "fwhm_nm": 20}` or `{"kind": "sampled",
 /// "wavelengths_nm": [...], "power": [...]}`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ProjectorSpectrum {
     /// A Gaussian band, a good model of a projector behind a narrow band-pass filter.
     Gaussian {
         /// Centre wavelength in nm, 380..=780.
+        #[cfg_attr(feature = "openapi", schema(minimum = 380.0, maximum = 780.0))]
         centre_nm: f64,
         /// Full width at half maximum in nm, 1..=200.
+        #[cfg_attr(feature = "openapi", schema(minimum = 1.0, maximum = 200.0))]
         fwhm_nm: f64,
     },
     /// A measured spectrum (any scale), interpolated linearly, 0 outside its range.
     Sampled {
         /// Sample wavelengths in nm, strictly increasing, within 360..=850.
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         wavelengths_nm: Vec<f64>,
         /// Spectral power at each wavelength (non-negative).
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         power: Vec<f64>,
     },
 }

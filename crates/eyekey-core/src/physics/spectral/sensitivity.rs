@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 /// standard observer's values) or `{"kind": "table", "wavelengths_nm": [...], "l": [...], "m":
 /// [...], "s": [...]}`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum SpectralSensitivity {
     /// Individual-observer parameters.
@@ -22,12 +23,16 @@ pub enum SpectralSensitivity {
     /// use).
     Table {
         /// Sample wavelengths in nm, strictly increasing, within 360..=850.
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         wavelengths_nm: Vec<f64>,
         /// L-cone sensitivity at each wavelength.
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         l: Vec<f64>,
         /// M-cone sensitivity at each wavelength.
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         m: Vec<f64>,
         /// S-cone sensitivity at each wavelength.
+        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
         s: Vec<f64>,
     },
 }
