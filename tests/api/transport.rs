@@ -11,6 +11,12 @@ use crate::helpers::{document_png, expect_json, spawn_app_in, spawn_app_with, te
 use eyekey::client::{sync_once, ClientConfig, SyncOutcome};
 use eyekey::service::Application;
 
+/// The error `Application::build` gives for `config`, which must be refused.
+async fn refusal(config: eyekey::service::Config) -> String {
+    let err = Application::build(config).await.err().expect("refused");
+    format!("{err:#}")
+}
+
 /// A CA and a certificate for localhost and 127.0.0.1 signed by it, written as PEM files into `dir`:
 /// (CA certificate, server certificate, server key).
 fn certificates(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
@@ -84,8 +90,8 @@ async fn plain_http_is_served_only_on_loopback_unless_asked_for() {
     let dir = tempfile::tempdir().unwrap();
     let mut config = test_config(dir.path());
     config.bind = "0.0.0.0:0".parse().unwrap();
-    let err = Application::build(config.clone()).await.err().expect("refused");
-    assert!(format!("{err:#}").contains("--tls-cert"), "{err:#}");
+    let text = refusal(config.clone()).await;
+    assert!(text.contains("--tls-cert"), "{text}");
     config.insecure_http = true;
     assert!(Application::build(config).await.is_ok(), "allowed when asked for");
 }
@@ -154,11 +160,8 @@ async fn a_client_trickling_its_headers_is_cut_off_and_an_oversize_body_is_refus
 async fn a_second_server_cannot_open_the_same_data_directory() {
     let dir = tempfile::tempdir().unwrap();
     let app = spawn_app_in(dir.path(), |_| {}).await;
-    let err = Application::build(test_config(dir.path()))
-        .await
-        .err()
-        .expect("refused");
-    assert!(format!("{err:#}").contains("another eyekey server"), "{err:#}");
+    let text = refusal(test_config(dir.path())).await;
+    assert!(text.contains("another eyekey server"), "{text}");
     app.stop().await;
     let again = spawn_app_in(dir.path(), |_| {}).await;
     again.stop().await;
@@ -173,22 +176,14 @@ async fn a_missing_master_key_is_an_error_never_a_new_key_and_a_bad_one_names_it
     let key_file = dir.path().join("master.key");
     let key = std::fs::read(&key_file).unwrap();
     std::fs::remove_file(&key_file).unwrap();
-    let err = Application::build(test_config(dir.path()))
-        .await
-        .err()
-        .expect("refused");
-    let text = format!("{err:#}");
+    let text = refusal(test_config(dir.path())).await;
     assert!(
         text.contains("master.key is missing") && text.contains("backup"),
         "{text}"
     );
     assert!(!key_file.exists(), "no new key was written");
     std::fs::write(&key_file, "not a key").unwrap();
-    let err = Application::build(test_config(dir.path()))
-        .await
-        .err()
-        .expect("refused");
-    let text = format!("{err:#}");
+    let text = refusal(test_config(dir.path())).await;
     assert!(
         text.contains("master.key") && !text.contains("EYEKEY_MASTER_KEY"),
         "{text}"
