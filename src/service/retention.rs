@@ -148,14 +148,17 @@ pub async fn seal_unsealed(state: &AppState) -> anyhow::Result<(usize, usize)> {
     for doc in &docs {
         let plain_path = state.data_dir().join(&doc.path);
         let bytes = tokio::fs::read(&plain_path).await?;
-        let key = DataKey::generate();
-        let wrapped = key.wrap(&state.master_key, &sealed::document_key_aad(&doc.id))?;
-        let relative = format!("documents/{}{}", doc.id, sealed::SUFFIX);
-        let mac = state.master_key.digest(super::routes::documents::DOCUMENT_MAC, &bytes);
-        let (path, aad) = (state.data_dir().join(&relative), sealed::document_aad(&doc.id));
-        tokio::task::spawn_blocking(move || sealed::seal_to_file(&path, &key, &aad, &bytes)).await??;
-        store::documents::set_sealed(&state.writer, &doc.id, &relative, &mac, &wrapped).await?;
-        if plain_path != state.data_dir().join(&relative) {
+        let (dir, master, id) = (state.data_dir().clone(), state.master_key.clone(), doc.id.clone());
+        let stored = tokio::task::spawn_blocking(move || sealed::store_document(&dir, &master, &id, &bytes)).await??;
+        store::documents::set_sealed(
+            &state.writer,
+            &doc.id,
+            &stored.path,
+            &stored.content_mac,
+            &stored.data_key,
+        )
+        .await?;
+        if plain_path != state.data_dir().join(&stored.path) {
             tokio::fs::remove_file(&plain_path).await?;
         }
         tracing::info!(document = %doc.id, "sealed a document stored before sealing");

@@ -12,6 +12,7 @@
 use std::path::Path;
 
 use super::crypto::{CryptoError, DataKey, MasterKey};
+use super::store::documents::DocumentRow;
 use super::store::jobs::JobRow;
 use eyekey_core::encoding::pipeline::EncodeOptions;
 
@@ -42,6 +43,44 @@ pub fn job_file_aad(id: &str, name: &str) -> Vec<u8> {
 /// The key of a row's `data_key` column.
 pub fn unwrap_key(master: &MasterKey, wrapped: Option<&[u8]>, aad: &[u8]) -> Result<DataKey, CryptoError> {
     DataKey::unwrap(master, wrapped.ok_or(CryptoError::Open)?, aad)
+}
+
+/// A job's data key, from its row (absent once the job is deleted).
+pub fn job_key(master: &MasterKey, row: &JobRow) -> Result<DataKey, CryptoError> {
+    unwrap_key(master, row.data_key.as_deref(), &job_key_aad(&row.id.to_string()))
+}
+
+/// The purpose under which upload digests are keyed ([`MasterKey::digest`]).
+pub const DOCUMENT_MAC: &str = "document-content";
+
+/// A document as stored: where its sealed file is, its wrapped data key and its keyed digest.
+#[derive(Clone, Debug)]
+pub struct StoredDocument {
+    /// Path of the sealed file relative to the data directory.
+    pub path: String,
+    /// The data key, wrapped by the master key.
+    pub data_key: Vec<u8>,
+    /// Keyed HMAC-SHA256 of the bytes, hex.
+    pub content_mac: String,
+}
+
+/// Seals a document's bytes under a new data key into `<data_dir>/documents/<id>.sealed` (blocking).
+pub fn store_document(data_dir: &Path, master: &MasterKey, id: &str, bytes: &[u8]) -> std::io::Result<StoredDocument> {
+    let key = DataKey::generate();
+    let data_key = key.wrap(master, &document_key_aad(id)).map_err(std::io::Error::other)?;
+    let path = format!("documents/{id}{SUFFIX}");
+    seal_to_file(&data_dir.join(&path), &key, &document_aad(id), bytes)?;
+    Ok(StoredDocument {
+        path,
+        data_key,
+        content_mac: master.digest(DOCUMENT_MAC, bytes),
+    })
+}
+
+/// A document's bytes, opened from its sealed file.
+pub async fn open_document(data_dir: &Path, master: &MasterKey, doc: &DocumentRow) -> Result<Vec<u8>, OpenError> {
+    let key = unwrap_key(master, doc.data_key.as_deref(), &document_key_aad(&doc.id)).map_err(|_| OpenError::Open)?;
+    open_file(&data_dir.join(&doc.path), &key, &document_aad(&doc.id)).await
 }
 
 /// Writes `bytes` (already sealed) to `path`: into `.<name>.part` beside it, fsynced, then renamed, and the
@@ -105,9 +144,7 @@ pub fn job_summary_aad(id: &str) -> Vec<u8> {
 
 /// Opens one of a job row's sealed fields (`name`: `options` or `summary`) under the job's key.
 fn open_job_field(master: &MasterKey, row: &JobRow, name: &str, sealed: &[u8]) -> Result<Vec<u8>, CryptoError> {
-    let id = row.id.to_string();
-    let key = unwrap_key(master, row.data_key.as_deref(), &job_key_aad(&id))?;
-    key.open(sealed, &job_file_aad(&id, name))
+    job_key(master, row)?.open(sealed, &job_file_aad(&row.id.to_string(), name))
 }
 
 /// A job's full options: the clear part joined with the sealed part, opened under the job's key.

@@ -124,12 +124,7 @@ async fn display_client_refuses_a_corrupted_bundle_and_keeps_showing_the_last_go
         .join("jobs")
         .join(format!("{bad}-1"))
         .join("bundle.zip.sealed");
-    let key = eyekey::service::sealed::unwrap_key(
-        &app.state.master_key,
-        app.job_row(&bad.to_string()).await.data_key.as_deref(),
-        &eyekey::service::sealed::job_key_aad(&bad.to_string()),
-    )
-    .unwrap();
+    let key = eyekey::service::sealed::job_key(&app.state.master_key, &app.job_row(&bad.to_string()).await).unwrap();
     let aad = eyekey::service::sealed::job_file_aad(&bad.to_string(), "bundle.zip");
     let mut bytes = key.open(&std::fs::read(&zip).unwrap(), &aad).unwrap();
     let middle = bytes.len() / 2;

@@ -286,12 +286,7 @@ impl TestApp {
         ));
         outputs.push(("views/target.png".into(), document_png(4, 4)));
         let id = job.id.to_string();
-        let key = eyekey::service::sealed::unwrap_key(
-            &self.state.master_key,
-            job.data_key.as_deref(),
-            &eyekey::service::sealed::job_key_aad(&id),
-        )
-        .unwrap();
+        let key = eyekey::service::sealed::job_key(&self.state.master_key, &job).unwrap();
         let files = eyekey::service::jobs::seal_outputs(&dir, &key, &id, &outputs).unwrap();
         let ok = store::jobs::mark_succeeded(
             &self.state.writer,

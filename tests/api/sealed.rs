@@ -437,12 +437,7 @@ async fn data_stored_in_clear_by_an_older_version_is_sealed_at_start_and_still_w
     std::fs::remove_file(dir.path().join(format!("documents/{}.sealed", f.document_id))).unwrap();
     std::fs::write(dir.path().join(&doc_path), &document).unwrap();
     let job = app.job_row(&id).await;
-    let key = eyekey::service::sealed::unwrap_key(
-        &app.state.master_key,
-        job.data_key.as_deref(),
-        &eyekey::service::sealed::job_key_aad(&id),
-    )
-    .unwrap();
+    let key = eyekey::service::sealed::job_key(&app.state.master_key, &job).unwrap();
     let plain_dir = dir.path().join(format!("jobs/{id}"));
     std::fs::rename(dir.path().join(format!("jobs/{id}-1")), &plain_dir).unwrap();
     for (path, sealed) in every_file(&plain_dir) {

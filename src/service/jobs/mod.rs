@@ -186,12 +186,8 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
     let attempt = job.attempts;
     tracing::info!(job = %job.id, attempt, "job started");
     let loaded = async {
-        let key = sealed::unwrap_key(
-            &state.master_key,
-            job.data_key.as_deref(),
-            &sealed::job_key_aad(&job.id.to_string()),
-        )
-        .map_err(|e| LoadError::Fatal(format!("the job's data key: {e}")))?;
+        let key = sealed::job_key(&state.master_key, &job)
+            .map_err(|e| LoadError::Fatal(format!("the job's data key: {e}")))?;
         Ok((load_spec(state, &job).await?, key))
     };
     let (spec, key) = match loaded.await {
@@ -544,7 +540,7 @@ async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::Rgb
     let doc = store::documents::get(&state.db, id)
         .await?
         .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} was deleted")))?;
-    let bytes = super::routes::documents::open_document(state, &doc)
+    let bytes = sealed::open_document(state.data_dir(), &state.master_key, &doc)
         .await
         .map_err(|e| match e {
             sealed::OpenError::Io(e) => LoadError::Transient(anyhow::anyhow!("reading the {role} document: {e}")),

@@ -19,7 +19,6 @@ use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
 use crate::service::auth::{scope, Operator};
-use crate::service::crypto::DataKey;
 use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
 use crate::service::images::{self, ImageProblem};
 use crate::service::sealed;
@@ -82,22 +81,10 @@ impl From<&DocumentRow> for DocumentView {
     }
 }
 
-/// The purpose under which upload digests are keyed ([`crate::service::crypto::MasterKey::digest`]).
-pub const DOCUMENT_MAC: &str = "document-content";
+pub use sealed::DOCUMENT_MAC;
 
 fn internal(e: impl Into<anyhow::Error>) -> ApiError {
     ApiError::Internal(e.into())
-}
-
-/// A document's bytes, opened from its sealed file.
-pub async fn open_document(state: &AppState, doc: &DocumentRow) -> Result<Vec<u8>, sealed::OpenError> {
-    let key = sealed::unwrap_key(
-        &state.master_key,
-        doc.data_key.as_deref(),
-        &sealed::document_key_aad(&doc.id),
-    )
-    .map_err(|_| sealed::OpenError::Open)?;
-    sealed::open_file(&state.data_dir().join(&doc.path), &key, &sealed::document_aad(&doc.id)).await
 }
 
 fn problem(p: ImageProblem) -> ApiError {
@@ -166,16 +153,9 @@ pub async fn upload_document(
     .map_err(problem)?;
 
     let id = id_text(&Uuid::new_v4());
-    let content_mac = state.master_key.digest(DOCUMENT_MAC, &bytes);
-    let key = DataKey::generate();
-    let wrapped = key
-        .wrap(&state.master_key, &sealed::document_key_aad(&id))
-        .map_err(internal)?;
-    let relative = format!("documents/{id}{}", sealed::SUFFIX);
-    let path = state.data_dir().join(&relative);
-    let aad = sealed::document_aad(&id);
     let len = bytes.len() as i64;
-    tokio::task::spawn_blocking(move || sealed::seal_to_file(&path, &key, &aad, &bytes))
+    let (dir, master, doc_id) = (state.data_dir().clone(), state.master_key.clone(), id.clone());
+    let stored = tokio::task::spawn_blocking(move || sealed::store_document(&dir, &master, &doc_id, &bytes))
         .await
         .map_err(internal)?
         .map_err(ApiError::from_io)?;
@@ -183,13 +163,13 @@ pub async fn upload_document(
         &state.writer,
         &store::documents::NewDocument {
             id: &id,
-            content_mac: &content_mac,
+            content_mac: &stored.content_mac,
             content_type: header.content_type(),
             bytes: len,
             width: header.width.into(),
             height: header.height.into(),
-            path: &relative,
-            data_key: &wrapped,
+            path: &stored.path,
+            data_key: &stored.data_key,
         },
     )
     .await?;

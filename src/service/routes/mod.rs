@@ -125,8 +125,7 @@ pub async fn send_sealed(
         return Err(ApiError::NotFound(what));
     };
     let id = job.id.to_string();
-    let key = sealed::unwrap_key(&state.master_key, job.data_key.as_deref(), &sealed::job_key_aad(&id))
-        .map_err(|_| ApiError::NotFound(what))?;
+    let key = sealed::job_key(&state.master_key, job).map_err(|_| ApiError::NotFound(what))?;
     let path = state.data_dir().join(dir).join(format!("{name}{}", sealed::SUFFIX));
     let plain = match sealed::open_file(&path, &key, &sealed::job_file_aad(&id, name)).await {
         Ok(p) => p,
