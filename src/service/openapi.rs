@@ -58,7 +58,7 @@ use super::routes;
         routes::tokens::list_tokens,
         routes::tokens::revoke_token,
     ),
-    modifiers(&BearerSchemes, &CommonResponses),
+    modifiers(&BearerSchemes, &CommonResponses, &TaggedVariants),
     tags(
         (name = "profiles", description = "Enrolled vision profiles (operator)"),
         (name = "displays", description = "Registered light-field displays (operator)"),
@@ -145,6 +145,53 @@ impl Modify for CommonResponses {
                             .build();
                         op.responses.responses.insert(code.to_string(), response.into());
                     }
+                }
+            }
+        }
+    }
+}
+
+/// An internally tagged enum's newtype variant is `allOf: [$ref X, {tag}]`; when X forbids unknown fields
+/// (`additionalProperties: false`), no object can satisfy both, so the variant would match nothing. The tag is
+/// declared on X as well, which is what serde accepts (`{"kind": "parameters", ...}`).
+struct TaggedVariants;
+
+impl Modify for TaggedVariants {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::schema::{AdditionalProperties, Schema};
+        use utoipa::openapi::RefOr;
+        let Some(components) = openapi.components.as_mut() else {
+            return;
+        };
+        let mut tags = Vec::new();
+        for schema in components.schemas.values() {
+            let RefOr::T(Schema::OneOf(one_of)) = schema else {
+                continue;
+            };
+            for item in &one_of.items {
+                let RefOr::T(Schema::AllOf(all_of)) = item else {
+                    continue;
+                };
+                let target = all_of.items.iter().find_map(|part| match part {
+                    RefOr::Ref(r) => r.ref_location.strip_prefix("#/components/schemas/").map(str::to_owned),
+                    _ => None,
+                });
+                let tag = all_of.items.iter().find_map(|part| match part {
+                    RefOr::T(Schema::Object(o)) => Some(o.properties.clone()),
+                    _ => None,
+                });
+                if let (Some(target), Some(tag)) = (target, tag) {
+                    tags.push((target, tag));
+                }
+            }
+        }
+        for (target, tag) in tags {
+            if let Some(RefOr::T(Schema::Object(object))) = components.schemas.get_mut(&target) {
+                if matches!(
+                    object.additional_properties.as_deref(),
+                    Some(AdditionalProperties::FreeForm(false))
+                ) {
+                    object.properties.extend(tag);
                 }
             }
         }

@@ -90,6 +90,11 @@ fn the_schemas_state_the_constraints_the_handlers_enforce() {
         ),
         (Some(1.0), Some(32.0))
     );
+    // The `parameters` variant is `allOf: [ObserverParameters, {kind}]`, and ObserverParameters forbids unknown
+    // fields: it must declare `kind` itself, or no profile would match the schema the service answers with.
+    let observer = &schemas["ObserverParameters"];
+    assert_eq!(observer["additionalProperties"], false);
+    assert_eq!(observer["properties"]["kind"]["enum"][0], "parameters");
     let options = &schemas["EncodeOptions"]["properties"];
     assert_eq!(options["population_decoys"]["maximum"].as_f64(), Some(64.0));
     assert_eq!(options["max_iterations"]["maximum"].as_f64(), Some(20000.0));
@@ -112,4 +117,114 @@ fn the_schemas_state_the_constraints_the_handlers_enforce() {
             }
         }
     }
+}
+
+/// The patterns the schema gives for names, labels and cursors accept exactly what the handlers accept:
+/// each is compiled and run against the handlers' own checks on texts at the edges (every control and
+/// bidirectional-override character, blanks, other whitespace, ordinary and non-Latin letters).
+#[test]
+fn the_schemas_patterns_accept_what_the_handlers_accept() {
+    use eyekey::service::routes::{check_name, check_text};
+    use eyekey::service::store::Cursor;
+    let doc: serde_json::Value = serde_json::from_str(&document_json()).unwrap();
+    let schemas = &doc["components"]["schemas"];
+    let compile = |pattern: &serde_json::Value| regex::Regex::new(pattern.as_str().expect("a pattern")).unwrap();
+
+    let mut texts: Vec<String> = vec![
+        String::new(),
+        " ".into(),
+        "\t".into(),
+        "  lobby  ".into(),
+        "Terminal 3".into(),
+        "Тест 終端 ☂".into(),
+        "a\u{00A0}b".into(),
+        "\u{2003}".into(),
+    ];
+    let special = (0u32..=0x9F)
+        .filter(|c| !(0x20..0x7F).contains(c))
+        .chain([
+            0x061C, 0x200E, 0x200F, 0x202A, 0x202B, 0x202C, 0x202D, 0x202E, 0x2066, 0x2067, 0x2068, 0x2069,
+        ])
+        .map(|c| char::from_u32(c).unwrap());
+    for c in special {
+        texts.push(format!("name{c}"));
+        texts.push(c.to_string());
+    }
+    // Around the ordinary characters next to the forbidden ranges.
+    for c in [
+        '\u{20}', '\u{7E}', '\u{A0}', '\u{061B}', '\u{200D}', '\u{2029}', '\u{2065}', '\u{206A}',
+    ] {
+        texts.push(format!("x{c}y"));
+    }
+
+    let label = compile(&schemas["EnrolProfile"]["properties"]["label"]["pattern"]);
+    let token_name = compile(&schemas["CreateToken"]["properties"]["name"]["pattern"]);
+    let variants = schemas["RegisterDisplay"]["oneOf"]
+        .as_array()
+        .expect("RegisterDisplay is a oneOf");
+    assert_eq!(variants.len(), 2, "a preset or a geometry");
+    for text in &texts {
+        assert_eq!(
+            label.is_match(text),
+            check_text("label", text, 200).is_ok(),
+            "label {text:?}"
+        );
+        assert_eq!(
+            token_name.is_match(text),
+            check_name("name", text, 100).is_ok(),
+            "token name {text:?}"
+        );
+        for variant in variants {
+            let target = variant["$ref"]
+                .as_str()
+                .unwrap()
+                .trim_start_matches("#/components/schemas/");
+            let name = compile(&schemas[target]["properties"]["name"]["pattern"]);
+            assert_eq!(
+                name.is_match(text),
+                check_name("name", text, 200).is_ok(),
+                "display name {text:?}"
+            );
+        }
+    }
+
+    let list = &doc["paths"]["/v1/jobs"]["get"]["parameters"];
+    let cursor = list.as_array().unwrap().iter().find(|p| p["name"] == "cursor").unwrap();
+    let cursor = compile(&cursor["schema"]["pattern"]);
+    let issued = Cursor {
+        created_at: 1_764_000_000_000,
+        id: "3f1c0b8e-6d7a-4c2e-9a55-0d8f3b2e1a77".into(),
+    }
+    .encode();
+    for text in [
+        issued.as_str(),
+        "0.1",
+        "123456789012345678.abc",
+        "1234567890123456789.abc",
+        "0",
+        "1.",
+        ".a",
+        "1.A",
+        "1.a.b",
+        "1.a_b",
+        "-1.a",
+        "1.0123456789012345678901234567890123456",
+        "MTcwMHwzZjFj",
+    ] {
+        assert_eq!(cursor.is_match(text), Cursor::decode(text).is_some(), "cursor {text:?}");
+    }
+    assert!(cursor.is_match(&issued));
+
+    let table = &schemas["SpectralSensitivity"]["oneOf"][1]["properties"];
+    assert_eq!(
+        table["wavelengths_nm"]["items"]["$ref"],
+        "#/components/schemas/WavelengthSample"
+    );
+    assert_eq!(table["l"]["items"]["$ref"], "#/components/schemas/SampleValue");
+    let sample = &schemas["WavelengthSample"];
+    assert_eq!(
+        (sample["minimum"].as_f64(), sample["maximum"].as_f64()),
+        (Some(360.0), Some(850.0))
+    );
+    assert_eq!(schemas["SampleValue"]["minimum"].as_f64(), Some(0.0));
 }

@@ -46,17 +46,63 @@ pub enum Preset {
     Dense,
 }
 
-/// Body of a registration: a name and either a preset or a full geometry.
-#[derive(Debug, Deserialize, utoipa::ToSchema)]
+/// Body of a registration: a name and either a preset or a full geometry. Its schema is
+/// [`RegisterDisplaySchema`], which states the "exactly one of" rule.
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegisterDisplay {
-    /// Operator's name for the display (1–200 characters).
-    #[schema(min_length = 1, max_length = 200)]
+    /// Operator's name for the display.
     pub name: String,
     /// A built-in design (give this or `geometry`).
     pub preset: Option<Preset>,
     /// Full geometry, projector spectra and viewing distance (give this or `preset`).
     pub geometry: Option<DisplayGeometry>,
+}
+
+/// Body of a registration: a name and exactly one of `preset` and `geometry`.
+#[derive(Deserialize, utoipa::ToSchema)]
+#[schema(as = RegisterDisplay)]
+#[allow(dead_code)] // a schema only: requests are read as [`RegisterDisplay`]
+#[serde(untagged)]
+pub enum RegisterDisplaySchema {
+    /// A built-in design.
+    Preset(RegisterByPreset),
+    /// A full geometry.
+    Geometry(RegisterByGeometry),
+}
+
+/// Registration from a built-in design.
+#[derive(Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)] // a schema only
+pub struct RegisterByPreset {
+    /// Operator's name for the display (1–200 characters, not blank, no control or bidirectional-override
+    /// characters).
+    #[schema(
+        min_length = 1,
+        max_length = 200,
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*[^\s\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069][^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*$"
+    )]
+    pub name: String,
+    /// The design.
+    pub preset: Preset,
+}
+
+/// Registration from a full geometry.
+#[derive(Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+#[allow(dead_code)] // a schema only
+pub struct RegisterByGeometry {
+    /// Operator's name for the display (1–200 characters, not blank, no control or bidirectional-override
+    /// characters).
+    #[schema(
+        min_length = 1,
+        max_length = 200,
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*[^\s\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069][^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*$"
+    )]
+    pub name: String,
+    /// Geometry, projector spectra and viewing distance.
+    pub geometry: DisplayGeometry,
 }
 
 /// A registered display.
@@ -154,7 +200,7 @@ const TOKEN_PREFIX: &str = "ekd_";
 /// `warnings`.
 #[utoipa::path(
     post, path = "/v1/displays", tag = "displays",
-    request_body = RegisterDisplay,
+    request_body = RegisterDisplaySchema,
     responses(
         (status = 201, description = "Registered; the token is shown once", body = DisplayWithToken),
         (status = 401, description = "No or unknown token", body = ErrorBody),
@@ -167,11 +213,7 @@ pub async fn register_display(
     op: Operator<scope::Admin>,
     ApiJson(body): ApiJson<RegisterDisplay>,
 ) -> Result<(StatusCode, Json<DisplayWithToken>), ApiError> {
-    let name = body.name.trim();
-    if name.is_empty() || name.chars().count() > 200 {
-        return Err(ApiError::invalid("name", "name must be 1 to 200 characters"));
-    }
-    super::check_text("name", name, 200)?;
+    let name = super::check_name("name", &body.name, 200)?;
     let geometry = match (body.preset, body.geometry) {
         (Some(_), Some(_)) => return Err(ApiError::invalid("preset", "give either preset or geometry, not both")),
         (None, None) => return Err(ApiError::invalid("geometry", "give a preset or a geometry")),

@@ -146,8 +146,9 @@ pub struct JobListQuery {
     /// Items per page (1–200, default 50).
     #[param(minimum = 1, maximum = 200)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page, as the service returned it (opaque).
-    #[param(pattern = "^[A-Za-z0-9_-]{1,200}$")]
+    /// `next_cursor` of the previous page, as the service returned it: `<created_at>.<id>` of the last item
+    /// seen.
+    #[param(pattern = r"^[0-9]{1,18}\.[0-9a-z-]{1,36}$")]
     pub cursor: Option<String>,
 }
 

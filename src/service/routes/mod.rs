@@ -46,8 +46,9 @@ pub struct PageQuery {
     /// Items per page (1–200, default 50).
     #[param(minimum = 1, maximum = 200)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page, as the service returned it (opaque).
-    #[param(pattern = "^[A-Za-z0-9_-]{1,200}$")]
+    /// `next_cursor` of the previous page, as the service returned it: `<created_at>.<id>` of the last item
+    /// seen.
+    #[param(pattern = r"^[0-9]{1,18}\.[0-9a-z-]{1,36}$")]
     pub cursor: Option<String>,
 }
 
@@ -62,9 +63,9 @@ impl PageQuery {
             ));
         }
         let cursor = match &self.cursor {
-            Some(c) => {
-                Some(Cursor::decode(c).ok_or_else(|| ApiError::invalid("cursor", "not a cursor this service issued"))?)
-            }
+            Some(c) => Some(Cursor::decode(c).ok_or_else(|| {
+                ApiError::invalid("cursor", "a cursor is `<created_at>.<id>`, as `next_cursor` gives it")
+            })?),
             None => None,
         };
         Ok((limit, cursor))
@@ -104,6 +105,20 @@ pub fn check_text(field: &str, value: &str, max: usize) -> Result<(), ApiError> 
         ));
     }
     Ok(())
+}
+
+/// Checks a name (a display's, a token's): [`check_text`] on it as sent, and not blank. Returns it trimmed of
+/// spaces.
+pub fn check_name<'a>(field: &str, value: &'a str, max: usize) -> Result<&'a str, ApiError> {
+    check_text(field, value, max)?;
+    let name = value.trim();
+    if name.is_empty() {
+        return Err(ApiError::invalid(
+            field,
+            format!("{field} must be 1 to {max} characters, not blank"),
+        ));
+    }
+    Ok(name)
 }
 
 /// The stored (hyphenated) form of an id.

@@ -29,8 +29,12 @@ pub fn router() -> Router<AppState> {
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EnrolProfile {
-    /// Operator's label (not secret; at most 200 characters). On re-enrolment, omitted keeps the old one.
-    #[schema(max_length = 200)]
+    /// Operator's label (not secret; at most 200 characters, no control or bidirectional-override characters).
+    /// On re-enrolment, omitted keeps the old one.
+    #[schema(
+        max_length = 200,
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*$"
+    )]
     pub label: Option<String>,
     /// The person's vision profile.
     pub profile: VisionProfile,
@@ -104,9 +108,6 @@ impl From<&ProfileRow> for ProfileMeta {
 fn check(body: &EnrolProfile) -> Result<Vec<u8>, ApiError> {
     if let Some(label) = &body.label {
         super::check_text("label", label, 200)?;
-        if label.chars().count() > 200 {
-            return Err(ApiError::invalid("label", "label must be at most 200 characters"));
-        }
     }
     body.profile.validate().map_err(|e| match e {
         ProfileError::Invalid { field, reason } => ApiError::invalid(format!("profile.{field}"), reason),

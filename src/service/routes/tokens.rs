@@ -9,7 +9,7 @@ use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
 use uuid::Uuid;
 
-use super::{check_text, id_text, next_cursor, PageQuery};
+use super::{check_name, id_text, next_cursor, PageQuery};
 use crate::service::auth::{scope, Operator, Scope, OPERATOR};
 use crate::service::crypto::{generate_token, token_hash};
 use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
@@ -32,7 +32,11 @@ const TOKEN_PREFIX: &str = "eko_";
 pub struct CreateToken {
     /// Who or what holds it, recorded in the audit log (1–100 characters, unique among live tokens, no
     /// control or bidirectional-override characters).
-    #[schema(min_length = 1, max_length = 100)]
+    #[schema(
+        min_length = 1,
+        max_length = 100,
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*[^\s\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069][^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*$"
+    )]
     pub name: String,
     /// What it may do: one or more of `enrol`, `submit`, `read-evaluation`, `admin`.
     #[schema(min_items = 1, max_items = 4)]
@@ -97,11 +101,7 @@ pub async fn create_token(
     op: Operator<scope::Admin>,
     ApiJson(body): ApiJson<CreateToken>,
 ) -> Result<(StatusCode, Json<TokenWithSecret>), ApiError> {
-    let name = body.name.trim();
-    if name.is_empty() {
-        return Err(ApiError::invalid("name", "name must be 1 to 100 characters"));
-    }
-    check_text("name", name, 100)?;
+    let name = check_name("name", &body.name, 100)?;
     if name == OPERATOR {
         return Err(ApiError::invalid("name", "`operator` is the bootstrap token's name"));
     }

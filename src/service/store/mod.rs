@@ -14,7 +14,6 @@ use std::path::Path;
 use std::str::FromStr as _;
 use std::time::Duration;
 
-use base64::Engine as _;
 use chrono::{DateTime, TimeZone as _, Utc};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::SqlitePool;
@@ -99,22 +98,32 @@ pub struct Cursor {
 }
 
 impl Cursor {
-    /// Opaque text form handed to clients.
+    /// Text form handed to clients: `<created_at>.<id>`, the keyset position of the last item of a page. Any
+    /// text of that form is a position, so the schema's pattern ([`CURSOR_PATTERN`]) says all there is to say.
     pub fn encode(&self) -> String {
-        base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(format!("{}|{}", self.created_at, self.id))
+        format!("{}.{}", self.created_at, self.id)
     }
 
-    /// Parses the text form; `None` when it is not one this service handed out.
+    /// Parses the text form; `None` when it does not match [`CURSOR_PATTERN`].
     pub fn decode(text: &str) -> Option<Self> {
-        let raw = base64::engine::general_purpose::URL_SAFE_NO_PAD.decode(text).ok()?;
-        let raw = String::from_utf8(raw).ok()?;
-        let (at, id) = raw.split_once('|')?;
+        let (at, id) = text.split_once('.')?;
+        let digits = |s: &str, max: usize| (1..=max).contains(&s.len()) && s.bytes().all(|b| b.is_ascii_digit());
+        let id_ok = (1..=36).contains(&id.len())
+            && id
+                .bytes()
+                .all(|b| b.is_ascii_digit() || b.is_ascii_lowercase() || b == b'-');
+        if !digits(at, 18) || !id_ok {
+            return None;
+        }
         Some(Self {
             created_at: at.parse().ok()?,
             id: id.to_string(),
         })
     }
 }
+
+/// The form of a listing's cursor (see [`Cursor::encode`]).
+pub const CURSOR_PATTERN: &str = r"^[0-9]{1,18}\.[0-9a-z-]{1,36}$";
 
 /// One page of `table`, newest first, by keyset pagination on (created_at, id): stable under concurrent
 /// inserts, unlike OFFSET. `live_only` skips soft-deleted rows (tables with a `deleted_at` column).
@@ -195,7 +204,19 @@ mod tests {
             created_at: 1_700_000_000_123,
             id: "3f1c".into(),
         };
+        assert_eq!(c.encode(), "1700000000123.3f1c");
         assert_eq!(Cursor::decode(&c.encode()), Some(c));
-        assert_eq!(Cursor::decode("not a cursor"), None);
+        for garbage in [
+            "not a cursor",
+            "",
+            "1.",
+            ".a",
+            "1.A",
+            "1.a.b",
+            "1234567890123456789.a",
+            "MTcwMHwzZjFj",
+        ] {
+            assert_eq!(Cursor::decode(garbage), None, "{garbage:?}");
+        }
     }
 }

@@ -30,6 +30,8 @@ pub use individual::*;
 pub use projectors::*;
 pub use sensitivity::*;
 use tables::*;
+#[cfg(feature = "openapi")]
+pub use tables::{SampleValue, WavelengthSample};
 
 /// First wavelength of the spectral grid, in nm.
 pub const WAVELENGTH_START_NM: f64 = 390.0;

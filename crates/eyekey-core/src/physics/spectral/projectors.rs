@@ -30,10 +30,10 @@ pub enum ProjectorSpectrum {
     /// A measured spectrum (any scale), interpolated linearly, 0 outside its range.
     Sampled {
         /// Sample wavelengths in nm, strictly increasing, within 360..=850.
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::WavelengthSample>))]
         wavelengths_nm: Vec<f64>,
         /// Spectral power at each wavelength (non-negative).
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::SampleValue>))]
         power: Vec<f64>,
     },
 }

@@ -23,16 +23,16 @@ pub enum SpectralSensitivity {
     /// use).
     Table {
         /// Sample wavelengths in nm, strictly increasing, within 360..=850.
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::WavelengthSample>))]
         wavelengths_nm: Vec<f64>,
         /// L-cone sensitivity at each wavelength.
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::SampleValue>))]
         l: Vec<f64>,
         /// M-cone sensitivity at each wavelength.
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::SampleValue>))]
         m: Vec<f64>,
         /// S-cone sensitivity at each wavelength.
-        #[cfg_attr(feature = "openapi", schema(min_items = 10))]
+        #[cfg_attr(feature = "openapi", schema(min_items = 10, value_type = Vec<crate::physics::spectral::SampleValue>))]
         s: Vec<f64>,
     },
 }

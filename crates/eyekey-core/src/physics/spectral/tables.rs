@@ -94,3 +94,56 @@ pub(crate) fn trapezoid(wavelengths: &[f64], values: &[f64]) -> f64 {
 pub(crate) fn grid_integral(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() * WAVELENGTH_STEP_NM
 }
+
+/// One sample wavelength of a user-supplied table, nm (the schema of an item of a table's `wavelengths_nm`).
+#[cfg(feature = "openapi")]
+pub struct WavelengthSample(pub f64);
+
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for WavelengthSample {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        number_schema(
+            Some(TABLE_RANGE_NM.0),
+            Some(TABLE_RANGE_NM.1),
+            "A sample wavelength, nm (360–850; the samples strictly increase)",
+        )
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for WavelengthSample {}
+
+/// One value of a user-supplied table's column: a sensitivity or a power, non-negative, any scale.
+#[cfg(feature = "openapi")]
+pub struct SampleValue(pub f64);
+
+#[cfg(feature = "openapi")]
+impl utoipa::PartialSchema for SampleValue {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        number_schema(
+            Some(0.0),
+            None,
+            "A value at the sample of the same index (non-negative, any scale)",
+        )
+    }
+}
+
+#[cfg(feature = "openapi")]
+impl utoipa::ToSchema for SampleValue {}
+
+#[cfg(feature = "openapi")]
+fn number_schema(
+    minimum: Option<f64>,
+    maximum: Option<f64>,
+    description: &str,
+) -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+    utoipa::openapi::ObjectBuilder::new()
+        .schema_type(utoipa::openapi::schema::Type::Number)
+        .format(Some(utoipa::openapi::SchemaFormat::KnownFormat(
+            utoipa::openapi::KnownFormat::Double,
+        )))
+        .minimum(minimum)
+        .maximum(maximum)
+        .description(Some(description))
+        .into()
+}
