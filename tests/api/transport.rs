@@ -83,6 +83,34 @@ async fn over_tls_the_display_client_trusts_the_servers_ca_and_nothing_else_gets
         sync_once(&untrusting).await.is_err(),
         "without --ca the server's certificate is not trusted"
     );
+
+    // The installed client trusts a CA named by SSL_CERT_FILE (the system roots' standard override) too.
+    let client = |ssl_cert_file: Option<&Path>| {
+        let out = tempfile::tempdir().unwrap();
+        let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_eyekey"));
+        command
+            .args(["display-client", "--once", "--server", &app.address, "--out"])
+            .arg(out.path())
+            .env("EYEKEY_DISPLAY_TOKEN", &f.display_token)
+            .env_remove("SSL_CERT_FILE")
+            .env_remove("SSL_CERT_DIR");
+        if let Some(file) = ssl_cert_file {
+            command.env("SSL_CERT_FILE", file);
+        }
+        let run = command.output().unwrap();
+        (
+            run.status.success(),
+            out.path().join("current").is_dir(),
+            String::from_utf8_lossy(&run.stderr).into_owned(),
+        )
+    };
+    let (ok, installed, log) = client(Some(&ca));
+    assert!(ok && installed, "with SSL_CERT_FILE: {log}");
+    let (ok, installed, _) = client(None);
+    assert!(
+        !ok && !installed,
+        "with neither --ca nor SSL_CERT_FILE the certificate is refused"
+    );
 }
 
 #[tokio::test]
@@ -235,6 +263,37 @@ fn fill(dir: &Path) -> PathBuf {
     }
     let _ = f.flush();
     path
+}
+
+/// A data directory that takes no new file (immutable, which binds root too) makes `/readyz` fail, naming the
+/// cause; when it takes writes again the service is ready again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readiness_fails_while_the_data_directory_takes_no_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let app = spawn_app_in(&data, |_| {}).await;
+    assert_eq!(app.op_get("/readyz").await.status(), StatusCode::OK);
+    let chattr = |flag: &str| {
+        let run = std::process::Command::new("chattr")
+            .arg(flag)
+            .arg(&data)
+            .output()
+            .expect("chattr (e2fsprogs)");
+        assert!(
+            run.status.success(),
+            "chattr {flag}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    };
+    chattr("+i");
+    let r = app.op_get("/readyz").await;
+    let status = r.status();
+    let body = r.text().await.unwrap();
+    chattr("-i");
+    assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE, "{body}");
+    assert!(body.contains("not writable"), "{body}");
+    assert_eq!(app.op_get("/readyz").await.status(), StatusCode::OK);
+    app.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
