@@ -68,6 +68,9 @@ pub mod scope {
     /// `admin` only.
     #[derive(Debug)]
     pub struct Admin;
+    /// Any operator token, whatever its scopes.
+    #[derive(Debug)]
+    pub struct AnyScope;
 
     impl Required for Enrol {
         const ANY_OF: &'static [Scope] = &[Scope::Enrol];
@@ -83,6 +86,9 @@ pub mod scope {
     }
     impl Required for Admin {
         const ANY_OF: &'static [Scope] = &[];
+    }
+    impl Required for AnyScope {
+        const ANY_OF: &'static [Scope] = &[Scope::Enrol, Scope::Submit, Scope::ReadEvaluation];
     }
 }
 

@@ -57,6 +57,9 @@ use super::routes;
         routes::tokens::create_token,
         routes::tokens::list_tokens,
         routes::tokens::revoke_token,
+        routes::tokens::me,
+        routes::documents::render_document,
+        routes::documents::get_document_image,
     ),
     modifiers(&BearerSchemes, &CommonResponses, &TaggedVariants),
     tags(
@@ -67,7 +70,7 @@ use super::routes;
         (name = "evaluation", description = "Reports and simulated views of succeeded jobs (operator)"),
         (name = "frames", description = "Frame bundles for a display client (display token)"),
         (name = "audit", description = "Append-only audit log (operator, admin scope)"),
-        (name = "tokens", description = "Scoped operator tokens (operator, admin scope)"),
+        (name = "tokens", description = "Scoped operator tokens (operator, admin scope); the caller's own scopes (any scope)"),
         (name = "operations", description = "Health and readiness (no token); metrics (operator, admin scope)"),
     )
 )]

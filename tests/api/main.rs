@@ -9,6 +9,7 @@ mod helpers;
 
 mod admission;
 mod authorization;
+mod console;
 mod display_client;
 mod displays;
 mod documents;

@@ -11,6 +11,7 @@ use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
 use axum::extract::{DefaultBodyLimit, State};
 use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::IntoResponse as _;
 use axum::routing::get;
 use axum::{Json, Router};
 use chrono::{DateTime, Utc};
@@ -19,7 +20,7 @@ use uuid::Uuid;
 
 use super::{id_text, next_cursor, PageQuery};
 use crate::service::auth::{scope, Operator};
-use crate::service::error::{ApiError, ApiPath, ApiQuery, ErrorBody};
+use crate::service::error::{ApiError, ApiJson, ApiPath, ApiQuery, ErrorBody};
 use crate::service::images::{self, ImageProblem};
 use crate::service::sealed;
 use crate::service::state::AppState;
@@ -34,7 +35,109 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
                 .post(upload_document)
                 .layer(DefaultBodyLimit::max(max_document_bytes)),
         )
+        .route("/v1/documents/text", axum::routing::post(render_document))
         .route("/v1/documents/{id}", get(get_document).delete(delete_document))
+        .route("/v1/documents/{id}/image", get(get_document_image))
+}
+
+/// Body of a rendered document: lines of text drawn in eyekey's 5×7 font, black on white, centred (what
+/// `eyekey example document` draws). A job on it can give the known-font attacker the layout
+/// (`options.document_text`).
+#[derive(Debug, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RenderDocument {
+    /// 1–16 lines of at most 64 characters: digits, letters (drawn in upper case), space and `: - . , #`.
+    #[schema(min_items = 1, max_items = 16, value_type = Vec<TextLine>)]
+    pub lines: Vec<String>,
+    /// Width, pixels (8–4096).
+    #[schema(minimum = 8, maximum = 4096)]
+    pub width: u32,
+    /// Height, pixels (8–4096).
+    #[schema(minimum = 8, maximum = 4096)]
+    pub height: u32,
+    /// Pixels per font dot (1–64); a character takes 6·scale × 9·scale pixels, and the text must fit.
+    #[schema(minimum = 1, maximum = 64)]
+    pub scale: u32,
+}
+
+/// One line of a rendered document (the schema of an item of `lines`).
+pub struct TextLine;
+
+impl utoipa::PartialSchema for TextLine {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .max_length(Some(64))
+            .pattern(Some(r"^[0-9A-Za-z:.,# -]*$"))
+            .description(Some("A line: digits, letters, space and `: - . , #`"))
+            .into()
+    }
+}
+
+impl utoipa::ToSchema for TextLine {}
+
+impl RenderDocument {
+    /// The image, or the field that is out of range.
+    fn render(&self, max_pixels: u64) -> Result<image::RgbImage, ApiError> {
+        use eyekey_core::imaging::glyphs;
+        if self.lines.is_empty() || self.lines.len() > 16 {
+            return Err(ApiError::invalid("lines", "give 1 to 16 lines"));
+        }
+        for (i, line) in self.lines.iter().enumerate() {
+            if line.chars().count() > 64 {
+                return Err(ApiError::invalid(
+                    format!("lines[{i}]"),
+                    "a line has at most 64 characters",
+                ));
+            }
+            if let Some(c) = line.chars().find(|&c| !c.is_ascii() || !glyphs::has_glyph(c)) {
+                return Err(ApiError::invalid(
+                    format!("lines[{i}]"),
+                    format!("{c:?} is not in the font (digits, letters, space and : - . , #)"),
+                ));
+            }
+        }
+        for (field, v) in [("width", self.width), ("height", self.height)] {
+            if !(8..=4096).contains(&v) {
+                return Err(ApiError::invalid(
+                    field,
+                    format!("{field} must be within 8..=4096, got {v}"),
+                ));
+            }
+        }
+        if u64::from(self.width) * u64::from(self.height) > max_pixels {
+            return Err(ApiError::TooLarge {
+                field: Some("width".into()),
+                message: format!(
+                    "{}×{} exceeds the limit of {max_pixels} pixels",
+                    self.width, self.height
+                ),
+            });
+        }
+        if !(1..=64).contains(&self.scale) {
+            return Err(ApiError::invalid(
+                "scale",
+                format!("scale must be within 1..=64, got {}", self.scale),
+            ));
+        }
+        let lines: Vec<&str> = self.lines.iter().map(String::as_str).collect();
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        let glyph = (5 * i64::from(self.scale), 7 * i64::from(self.scale));
+        let cells = glyphs::text_cells(&lines, self.width, self.height, self.scale);
+        if cells
+            .iter()
+            .any(|c| c.x < 0 || c.y < 0 || c.x + glyph.0 > w || c.y + glyph.1 > h)
+        {
+            return Err(ApiError::invalid(
+                "scale",
+                format!(
+                    "the text does not fit in {}×{} at scale {}: make the image larger or the scale smaller",
+                    self.width, self.height, self.scale
+                ),
+            ));
+        }
+        Ok(glyphs::render_text(&lines, self.width, self.height, self.scale))
+    }
 }
 
 /// An uploaded document's metadata.
@@ -152,6 +255,71 @@ pub async fn upload_document(
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(problem)?;
 
+    store_new(
+        &state,
+        &op,
+        bytes,
+        header.content_type(),
+        header.width,
+        header.height,
+        "document.upload",
+    )
+    .await
+}
+
+/// Render a document from text.
+///
+/// Draws the lines in eyekey's 5×7 font, black on white and centred, and stores the PNG as an upload would
+/// be stored. The known-font attacker of a job on it can then be given the layout (`options.document_text`).
+#[utoipa::path(
+    post, path = "/v1/documents/text", tag = "documents",
+    request_body = RenderDocument,
+    responses(
+        (status = 201, description = "Rendered and stored", body = DocumentView),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 413, description = "More pixels than the document limit", body = ErrorBody),
+        (status = 422, description = "A character outside the font, or text that does not fit; `field` names it", body = ErrorBody),
+    ),
+    security(("operator" = ["submit", "admin"]))
+)]
+pub async fn render_document(
+    State(state): State<AppState>,
+    op: Operator<scope::Submit>,
+    ApiJson(body): ApiJson<RenderDocument>,
+) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
+    let image = body.render(state.config.limits.max_document_pixels)?;
+    let (width, height) = image.dimensions();
+    let png = tokio::task::spawn_blocking(move || {
+        let mut png = std::io::Cursor::new(Vec::new());
+        image
+            .write_to(&mut png, image::ImageFormat::Png)
+            .map(|()| png.into_inner())
+    })
+    .await
+    .map_err(internal)?
+    .map_err(internal)?;
+    store_new(
+        &state,
+        &op,
+        Bytes::from(png),
+        "image/png",
+        width,
+        height,
+        "document.render",
+    )
+    .await
+}
+
+/// Seals a checked image under a new document id and records it.
+async fn store_new(
+    state: &AppState,
+    op: &Operator<scope::Submit>,
+    bytes: Bytes,
+    content_type: &str,
+    width: u32,
+    height: u32,
+    action: &str,
+) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
     let id = id_text(&Uuid::new_v4());
     let len = bytes.len() as i64;
     let (dir, master, doc_id) = (state.data_dir().clone(), state.master_key.clone(), id.clone());
@@ -164,22 +332,16 @@ pub async fn upload_document(
         &store::documents::NewDocument {
             id: &id,
             content_mac: &stored.content_mac,
-            content_type: header.content_type(),
+            content_type,
             bytes: len,
-            width: header.width.into(),
-            height: header.height.into(),
+            width: width.into(),
+            height: height.into(),
             path: &stored.path,
             data_key: &stored.data_key,
         },
     )
     .await?;
-    store::audit::record(
-        &state.writer,
-        &op.actor(),
-        "document.upload",
-        &format!("documents/{id}"),
-    )
-    .await?;
+    store::audit::record(&state.writer, &op.actor(), action, &format!("documents/{id}")).await?;
     Ok((StatusCode::CREATED, Json(DocumentView::from(&row))))
 }
 
@@ -203,6 +365,42 @@ pub async fn get_document(
         .await?
         .ok_or(ApiError::NotFound("document"))?;
     Ok(Json(DocumentView::from(&row)))
+}
+
+/// Read a document's image, as uploaded (or rendered), opened from its sealed file.
+#[utoipa::path(
+    get, path = "/v1/documents/{id}/image", tag = "documents",
+    params(("id" = Uuid, Path, description = "Document id")),
+    responses(
+        (status = 200, description = "The image", content(("image/png"), ("image/jpeg"))),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such document", body = ErrorBody),
+    ),
+    security(("operator" = ["submit", "admin"]))
+)]
+pub async fn get_document_image(
+    State(state): State<AppState>,
+    _op: Operator<scope::Submit>,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<axum::response::Response, ApiError> {
+    let row = store::documents::get(&state.db, &id_text(&id))
+        .await?
+        .ok_or(ApiError::NotFound("document"))?;
+    let bytes = match sealed::open_document(state.data_dir(), &state.master_key, &row).await {
+        Ok(bytes) => bytes,
+        Err(sealed::OpenError::Missing) => return Err(ApiError::NotFound("document")),
+        Err(sealed::OpenError::Io(e)) => return Err(ApiError::from_io(e)),
+        Err(e) => return Err(internal(anyhow::anyhow!("document {}: {e}", row.id))),
+    };
+    let content_type = axum::http::HeaderValue::from_str(&row.content_type).map_err(internal)?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, content_type),
+            (header::CACHE_CONTROL, axum::http::HeaderValue::from_static("no-store")),
+        ],
+        bytes,
+    )
+        .into_response())
 }
 
 /// List documents, newest first.

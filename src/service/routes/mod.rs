@@ -1,6 +1,7 @@
 //! HTTP handlers, one module per resource, each with its own `router()`.
 
 pub mod audit;
+pub mod console;
 pub mod displays;
 pub mod documents;
 pub mod evaluation;
@@ -37,6 +38,7 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
         .merge(frames::router())
         .merge(audit::router())
         .merge(tokens::router())
+        .merge(console::router())
 }
 
 /// `?limit=&cursor=` of a listing.

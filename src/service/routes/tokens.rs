@@ -21,6 +21,32 @@ pub fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/tokens", get(list_tokens).post(create_token))
         .route("/v1/tokens/{id}", delete(revoke_token))
+        .route("/v1/me", get(me))
+}
+
+/// Who a token is: its name and scopes.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct Me {
+    /// The token's name (`operator` for the bootstrap token).
+    pub name: String,
+    /// Its scopes; `admin` holds every other.
+    pub scopes: Vec<Scope>,
+}
+
+/// The calling operator token's name and scopes (any scope), so a client can offer only what the token may do.
+#[utoipa::path(
+    get, path = "/v1/me", tag = "tokens",
+    responses(
+        (status = 200, description = "The token's name and scopes", body = Me),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+    ),
+    security(("operator" = ["enrol", "submit", "read-evaluation", "admin"]))
+)]
+pub async fn me(op: Operator<scope::AnyScope>) -> Json<Me> {
+    Json(Me {
+        name: op.name,
+        scopes: op.scopes,
+    })
 }
 
 /// Operator tokens start with this, so a leaked one is recognisable.
