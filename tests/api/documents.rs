@@ -162,3 +162,74 @@ async fn documents_have_their_own_byte_limit_above_the_json_one() {
     assert!(png.len() > 1000);
     expect_json(upload(&app, "image/png", png).await, StatusCode::CREATED).await;
 }
+
+/// A document rendered from text is the PNG `eyekey example document` would draw, stored sealed like an
+/// upload; characters outside the font, text that does not fit and too many pixels are refused by field.
+#[tokio::test]
+async fn a_document_rendered_from_text_is_the_font_drawn_image_and_bad_layouts_name_their_field() {
+    let app = spawn_app_with(|c| c.limits.max_document_pixels = 100_000).await;
+    let body = serde_json::json!({ "lines": ["PIN", "4821"], "width": 48, "height": 48, "scale": 2 });
+    let doc = expect_json(app.op_post("/v1/documents/text", &body).await, StatusCode::CREATED).await;
+    assert_eq!((doc["width"].as_i64(), doc["height"].as_i64()), (Some(48), Some(48)));
+    assert_eq!(doc["content_type"], "image/png");
+    let id = doc["id"].as_str().unwrap();
+    let r = app.op_get(&format!("/v1/documents/{id}/image")).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()["content-type"], "image/png");
+    assert_eq!(r.headers()["cache-control"], "no-store");
+    let got = image::load_from_memory(&r.bytes().await.unwrap()).unwrap().to_rgb8();
+    let expected = eyekey_core::imaging::glyphs::render_text(&["PIN", "4821"], 48, 48, 2);
+    assert_eq!(got, expected);
+    // An upload reads back byte for byte.
+    let png = document_png(30, 20);
+    let up = expect_json(upload(&app, "image/png", png.clone()).await, StatusCode::CREATED).await;
+    let r = app
+        .op_get(&format!("/v1/documents/{}/image", up["id"].as_str().unwrap()))
+        .await;
+    assert_eq!(r.bytes().await.unwrap().to_vec(), png);
+    let r = app
+        .op_get(&format!("/v1/documents/{}/image", uuid::Uuid::new_v4()))
+        .await;
+    expect_error(r, StatusCode::NOT_FOUND, "not_found").await;
+
+    for (body, status, field, words) in [
+        (
+            serde_json::json!({ "lines": ["PIN €"], "width": 64, "height": 64, "scale": 1 }),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "lines[0]",
+            "not in the font",
+        ),
+        (
+            serde_json::json!({ "lines": [], "width": 64, "height": 64, "scale": 1 }),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "lines",
+            "1 to 16",
+        ),
+        (
+            serde_json::json!({ "lines": ["4821"], "width": 48, "height": 48, "scale": 3 }),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "scale",
+            "does not fit",
+        ),
+        (
+            serde_json::json!({ "lines": ["4821"], "width": 4, "height": 48, "scale": 1 }),
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "width",
+            "8..=4096",
+        ),
+        (
+            serde_json::json!({ "lines": ["4821"], "width": 4000, "height": 4000, "scale": 1 }),
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "width",
+            "100000 pixels",
+        ),
+    ] {
+        let e = expect_json(app.op_post("/v1/documents/text", &body).await, status).await;
+        assert_eq!(e["error"]["field"], field, "{e}");
+        assert!(e["error"]["message"].as_str().unwrap().contains(words), "{e}");
+    }
+    // Display tokens never read a document.
+    let (_, display) = app.register_display().await;
+    let r = app.display_get(&display, &format!("/v1/documents/{id}/image")).await;
+    expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
+}

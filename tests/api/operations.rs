@@ -86,3 +86,61 @@ async fn the_audit_log_never_holds_profile_contents() {
     assert!(text.contains(&format!("profiles/{id}")));
     assert!(!text.contains("0.123456789") && !text.contains("zernike"));
 }
+
+/// The console is served without a token, every page under `/console/` is the same document, and its
+/// headers keep it to its own origin (no inline script, no framing, no referrer).
+#[tokio::test]
+async fn the_console_is_served_with_a_strict_content_security_policy() {
+    let app = crate::helpers::spawn_app().await;
+    let index = app.client.get(app.url("/console")).send().await.unwrap();
+    assert_eq!(index.status(), reqwest::StatusCode::OK);
+    let csp = index.headers()["content-security-policy"].to_str().unwrap().to_string();
+    for directive in [
+        "default-src 'none'",
+        "script-src 'self'",
+        "connect-src 'self'",
+        "frame-ancestors 'none'",
+    ] {
+        assert!(csp.contains(directive), "{csp}");
+    }
+    assert!(!csp.contains("unsafe-inline"), "{csp}");
+    assert_eq!(index.headers()["referrer-policy"], "no-referrer");
+    let html = index.text().await.unwrap();
+    assert!(
+        html.contains("/console/assets/console.js") && !html.contains("<script>"),
+        "no inline script"
+    );
+    let page = app
+        .client
+        .get(app.url("/console/jobs/0f0cd33c-2d0c-4105-8a19-f19b1241a6bf"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(page.text().await.unwrap(), html);
+    for (asset, kind) in [
+        ("console.js", "text/javascript"),
+        ("console.css", "text/css"),
+        ("icon.svg", "image/svg+xml"),
+    ] {
+        let r = app
+            .client
+            .get(app.url(&format!("/console/assets/{asset}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), reqwest::StatusCode::OK, "{asset}");
+        assert!(
+            r.headers()["content-type"].to_str().unwrap().starts_with(kind),
+            "{asset}"
+        );
+    }
+    let r = app
+        .client
+        .get(app.url("/console/assets/../../master.key"))
+        .send()
+        .await
+        .unwrap();
+    assert_ne!(r.status(), reqwest::StatusCode::OK);
+    let r = app.client.get(app.url("/console/assets/nope.js")).send().await.unwrap();
+    assert_eq!(r.status(), reqwest::StatusCode::NOT_FOUND);
+}

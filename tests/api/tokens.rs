@@ -166,3 +166,27 @@ async fn bad_token_requests_name_the_field() {
         .await;
     assert_eq!(r.status(), StatusCode::UNPROCESSABLE_ENTITY);
 }
+
+/// `GET /v1/me` tells any operator token its name and scopes; a display token is refused, no token is 401.
+#[tokio::test]
+async fn a_token_can_ask_who_it_is() {
+    let app = spawn_app().await;
+    let me = expect_json(app.op_get("/v1/me").await, StatusCode::OK).await;
+    assert_eq!(me, json!({ "name": "operator", "scopes": ["admin"] }));
+    let (_, secret) = make(&app, "auditor", json!(["read-evaluation", "enrol"])).await;
+    let me = expect_json(get_as(&app, &secret, "/v1/me").await, StatusCode::OK).await;
+    assert_eq!(me, json!({ "name": "auditor", "scopes": ["enrol", "read-evaluation"] }), "stored sorted");
+    let (_, display) = app.register_display().await;
+    expect_error(
+        get_as(&app, &display, "/v1/me").await,
+        StatusCode::FORBIDDEN,
+        "forbidden",
+    )
+    .await;
+    expect_error(
+        get_as(&app, "eko_unknown", "/v1/me").await,
+        StatusCode::UNAUTHORIZED,
+        "unauthorized",
+    )
+    .await;
+}
