@@ -197,7 +197,11 @@ impl Application {
             _lock: lock,
             ..
         } = self;
-        tracing::info!(address = %listener.local_addr()?, scheme, workers = state.config.workers, "eyekey serving");
+        let address = listener.local_addr()?;
+        tracing::info!(%address, scheme, workers = state.config.workers, "eyekey serving");
+        tracing::info!(
+            "operator console at {scheme}://{address}/console (sign in with the operator token), API documentation at {scheme}://{address}/docs"
+        );
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
         let retention = super::retention::spawn_retention(&state);
 

@@ -153,10 +153,6 @@ async fn shot(c: &Client, name: &str) {
     c.set_window_size(1280, height as u32 + 120).await.unwrap();
     let png = c.screenshot().await.unwrap();
     std::fs::write(shots_dir().join(format!("{name}.png")), &png).unwrap();
-    if std::env::var_os("EYEKEY_WRITE_SCREENSHOTS").is_some() && name == "job" {
-        let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/images/console-job.png");
-        std::fs::write(docs, &png).unwrap();
-    }
     c.set_window_size(1280, 1000).await.unwrap();
 }
 
@@ -170,6 +166,15 @@ async fn wait_until(c: &Client, what: &str, script: &str, secs: u64) {
         assert!(std::time::Instant::now() < deadline, "timed out waiting for {what}");
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
+}
+
+/// Presses one key (a WebDriver key code such as Tab, U+E004) wherever the focus is.
+async fn press(c: &Client, key: char) {
+    use fantoccini::actions::{InputSource as _, KeyAction, KeyActions};
+    let keys = KeyActions::new("keyboard".into())
+        .then(KeyAction::Down { value: key })
+        .then(KeyAction::Up { value: key });
+    c.perform_actions(keys).await.unwrap();
 }
 
 async fn text_of(c: &Client, css: &str) -> String {
@@ -257,8 +262,23 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     );
     expect_only_refusal(&c, "/v1/me", 401).await;
 
+    // Keyboard only: the error put the focus on the field it names, Tab moves on to the button, and Enter in
+    // the field signs in.
+    let focused = c.execute("return document.activeElement.id", vec![]).await.unwrap();
+    assert_eq!(focused, json!("token"), "the field in error has the focus");
+    press(&c, '\u{E004}').await;
+    let focused = c
+        .execute("return document.activeElement.textContent", vec![])
+        .await
+        .unwrap();
+    assert_eq!(focused, json!("Sign in"), "Tab reaches the button");
     type_into(&c, "#token", OPERATOR_TOKEN).await;
-    click(&c, "#sign-in button[type=submit]").await;
+    c.find(Locator::Css("#token"))
+        .await
+        .unwrap()
+        .send_keys("\u{E007}")
+        .await
+        .unwrap();
     wait_until(
         &c,
         "the jobs page",
@@ -313,6 +333,45 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
         &c,
         "two profiles listed",
         "return document.querySelectorAll('#profiles > tbody > tr:not([hidden])').length === 2",
+        10,
+    )
+    .await;
+    // Re-enrolment from Bob's versions panel makes version 2, and both versions can be read.
+    let bob_row = "//table[@id='profiles']/tbody/tr[td[1][normalize-space()='Bob']]";
+    c.find(Locator::XPath(&format!(
+        "{bob_row}//button[normalize-space()='Versions']"
+    )))
+    .await
+    .unwrap()
+    .click()
+    .await
+    .unwrap();
+    wait_until(
+        &c,
+        "Bob's profile",
+        "return !!document.querySelector('#profiles pre')",
+        10,
+    )
+    .await;
+    let mut changed = myope();
+    changed.pupil_diameter_mm = 4.0;
+    std::fs::write(&profile_file, serde_json::to_vec(&changed).unwrap()).unwrap();
+    c.find(Locator::XPath("//table[@id='profiles']//form//input[@type='file']"))
+        .await
+        .unwrap()
+        .send_keys(profile_file.to_str().unwrap())
+        .await
+        .unwrap();
+    c.find(Locator::XPath("//table[@id='profiles']//form//button[@type='submit']"))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    wait_until(
+        &c,
+        "Bob's version 2",
+        "return [...document.querySelectorAll('#profiles td.num')].some(td => td.textContent === '2')",
         10,
     )
     .await;
@@ -558,7 +617,7 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     assert!(text_of(&c, "main table.audit").await.contains("display.register"));
     shot(&c, "audit").await;
 
-    // Keyboard: the first Tab from the top reaches the skip link, and every input has a label.
+    // Every input has a label.
     let unlabelled = c
         .execute(
             "return [...document.querySelectorAll('input, select, textarea')].filter(e => !e.labels?.length && !e.getAttribute('aria-label')).length",

@@ -175,7 +175,11 @@ async fn a_token_can_ask_who_it_is() {
     assert_eq!(me, json!({ "name": "operator", "scopes": ["admin"] }));
     let (_, secret) = make(&app, "auditor", json!(["read-evaluation", "enrol"])).await;
     let me = expect_json(get_as(&app, &secret, "/v1/me").await, StatusCode::OK).await;
-    assert_eq!(me, json!({ "name": "auditor", "scopes": ["enrol", "read-evaluation"] }), "stored sorted");
+    assert_eq!(
+        me,
+        json!({ "name": "auditor", "scopes": ["enrol", "read-evaluation"] }),
+        "stored sorted"
+    );
     let (_, display) = app.register_display().await;
     expect_error(
         get_as(&app, &display, "/v1/me").await,

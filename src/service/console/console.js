@@ -341,7 +341,26 @@ function profileRow(p, reload) {
     const select = h("select", {}, Array.from({ length: p.version }, (_, i) => h("option", { value: i + 1, selected: i + 1 === v }, `version ${i + 1}`)));
     select.addEventListener("change", () => showVersion(Number(select.value)));
     const d = await api("GET", `/v1/profiles/${p.id}?version=${v}`);
-    put(detail, field("Version", select), h("pre", {}, JSON.stringify(d.profile, null, 2)));
+    put(detail, field("Version", select), h("pre", {}, JSON.stringify(d.profile, null, 2)), reenrolForm());
+  }
+  function reenrolForm() {
+    const file = h("input", { type: "file", accept: "application/json,.json", "data-field": "profile" });
+    return form({ "aria-label": `Re-enrol ${p.label || short(p.id)}` }, [
+      h("h3", {}, "Re-enrol (a new version; jobs keep the version they used)"),
+      field("New profile file", file),
+      h("div", { class: "actions" }, h("button", { type: "submit" }, "Re-enrol")),
+    ], async () => {
+      if (!file.files.length) throw new FormError("profile", "choose a file");
+      let parsed;
+      try {
+        parsed = JSON.parse(await file.files[0].text());
+      } catch (e) {
+        throw new FormError("profile", `the file is not JSON (${e.message})`);
+      }
+      const r = await api("PUT", `/v1/profiles/${p.id}`, { json: parsed && parsed.profile ? parsed : { profile: parsed } });
+      await reload();
+      return `Version ${r.version} enrolled.`;
+    });
   }
   return [h("tr", {},
     h("td", {}, p.label || h("em", {}, "no label")),
@@ -760,13 +779,15 @@ async function jobPage(id) {
   const results = h("div", { id: "job-results" });
   const audit = h("section", { id: "job-audit" });
   render(`Job ${short(id)}`, status, results, audit);
+  const labels = await profileLabels();
+  const who = (profileId, version) => `${labels[profileId] ? `${labels[profileId]}: ` : ""}${profileId} (version ${version})`;
   let job = await api("GET", `/v1/jobs/${id}`);
   showStatus(job);
   if (!TERMINAL.includes(job.state)) job = await follow(id, signal, showStatus);
   if (signal.aborted) return;
   showStatus(job);
   if (job.state === "succeeded") {
-    if (has("read-evaluation")) await showEvaluation(job, results);
+    if (has("read-evaluation")) await showEvaluation(job, results, labels);
     else put(results, needs("read-evaluation"));
   }
   if (has("admin")) await showAudit(id, audit);
@@ -780,8 +801,8 @@ async function jobPage(id) {
         h("dt", {}, "Progress"), h("dd", {}, h("progress", { max: 100, value: pct, "aria-label": "Progress" }), ` ${pct} %`),
         h("dt", {}, "Attempts"), h("dd", {}, `${j.attempts} of ${j.max_attempts}`),
         h("dt", {}, "Method"), h("dd", {}, j.method),
-        h("dt", {}, "Target"), h("dd", { class: "mono" }, `${j.profile_id} (version ${j.profile_version})`),
-        h("dt", {}, "Observers"), h("dd", { class: "mono" }, j.observers.length ? j.observers.map((o) => `${o.profile_id} (version ${o.version})`).join(", ") : "none"),
+        h("dt", {}, "Target"), h("dd", {}, who(j.profile_id, j.profile_version)),
+        h("dt", {}, "Observers"), h("dd", {}, j.observers.length ? j.observers.map((o) => who(o.profile_id, o.version)).join("; ") : "none"),
         h("dt", {}, "Display"), h("dd", { class: "mono" }, j.display_id),
         h("dt", {}, "Document"), h("dd", { class: "mono" }, j.document_id),
         h("dt", {}, "Created"), h("dd", {}, fmtTime(j.timings.created_at)),
@@ -857,9 +878,9 @@ async function profileLabels() {
   return labels;
 }
 
-async function showEvaluation(job, results) {
+async function showEvaluation(job, results, labels) {
   const id = job.id;
-  const [report, views, labels] = await Promise.all([api("GET", `/v1/jobs/${id}/evaluation`), api("GET", `/v1/jobs/${id}/views`), profileLabels()]);
+  const [report, views] = await Promise.all([api("GET", `/v1/jobs/${id}/evaluation`), api("GET", `/v1/jobs/${id}/views`)]);
   const who = (profileId) => labels[profileId] || short(profileId);
   report.target.label = who(job.profile_id);
   (report.observers || []).forEach((o, k) => {
@@ -893,7 +914,9 @@ async function showEvaluation(job, results) {
   put(results, 
     h("section", {}, h("h2", {}, "What each viewer sees"), h("div", { class: "views", id: "views" }, figures)),
     p ? h("section", {}, h("h2", {}, "Who else can read it"),
-      h("p", { id: "population-summary" }, `${p.readable_count} of ${p.count} sampled people read it (${fmt(100 * p.readable_fraction, 1)} %, 95 % interval ${fmt(100 * p.readable_ci95[0], 1)}–${fmt(100 * p.readable_ci95[1], 1)} %); ${typeof p.known_font_readers === "number" ? ` the known-font attacker read it for ${p.known_font_readers};` : ""} median legibility ${fmt(p.median_legibility)}, 95th percentile ${fmt(p.p95_legibility)}, highest ${fmt(p.max_legibility)}; readable means legibility ≥ ${fmt(report.threshold)}.`),
+      h("p", { id: "population-summary" }, `${p.readable_count} of ${p.count} sampled people read it (${fmt(100 * p.readable_fraction, 1)} %, 95 % interval ${fmt(100 * p.readable_ci95[0], 1)}–${fmt(100 * p.readable_ci95[1], 1)} %); ${typeof p.known_font_readers === "number" ? ` the known-font attacker read it for ${p.known_font_readers};` : ""} median legibility ${fmt(p.median_legibility)}, 95th percentile ${fmt(p.p95_legibility)}, highest ${fmt(p.max_legibility)}. ${report.target.known_font
+        ? "A viewer reads it when the known-font attacker reads every secret character from their view; legibility is shown for reference."
+        : `A viewer reads it at legibility ≥ ${fmt(report.threshold)} (the job gave no text hint, so the known-font attacker did not run).`}`),
       populationPlot(people, report.threshold, report.target.legibility)) : null,
     h("section", {}, h("h2", {}, "The attackers' verdicts"),
       h("table", { id: "verdicts" },
@@ -904,21 +927,31 @@ async function showEvaluation(job, results) {
 
 /** A histogram of the sampled people's legibility with the threshold and the target marked. */
 function populationPlot(people, threshold, target) {
-  const W = 640, H = 220, L = 44, R = 12, T = 14, B = 36;
+  const W = 640, H = 236, L = 44, R = 12, T = 30, B = 36;
   const bins = 25;
   const counts = new Array(bins).fill(0);
-  for (const q of people) counts[Math.min(bins - 1, Math.max(0, Math.floor(q.legibility * bins)))] += 1;
+  const readers = new Array(bins).fill(0);
+  for (const q of people) {
+    const i = Math.min(bins - 1, Math.max(0, Math.floor(q.legibility * bins)));
+    counts[i] += 1;
+    if (q.readable) readers[i] += 1;
+  }
   const top = Math.max(1, ...counts);
   const x = (v) => L + v * (W - L - R);
   const y = (c) => H - B - (c / top) * (H - T - B);
   const svg = s("svg", { class: "plot", id: "population-plot", viewBox: `0 0 ${W} ${H}`, width: W, height: H, role: "img",
-    "aria-label": `Histogram of the legibility of ${people.length} sampled people; threshold ${fmt(threshold)}, target ${fmt(target)}` });
+    "aria-label": `Histogram of the legibility of ${people.length} sampled people, ${people.filter((q) => q.readable).length} of whom read it; threshold ${fmt(threshold)}, target ${fmt(target)}` });
+  // Each bar: the people in that legibility bin; the part of it who read the document is dark and outlined.
   counts.forEach((c, i) => {
     if (c === 0) return;
-    const above = (i + 0.5) / bins >= threshold;
-    svg.append(s("rect", { x: x(i / bins) + 1, y: y(c), width: (W - L - R) / bins - 2, height: H - B - y(c),
-      fill: above ? "#8a1b1b" : "#8a96a3", stroke: above ? "#16202a" : "none", "stroke-dasharray": above ? "2 2" : "" }));
+    const bx = x(i / bins) + 1, bw = (W - L - R) / bins - 2;
+    svg.append(s("rect", { x: bx, y: y(c), width: bw, height: H - B - y(c), fill: "#b8c1ca" }));
+    if (readers[i] > 0) {
+      svg.append(s("rect", { x: bx, y: y(readers[i]), width: bw, height: H - B - y(readers[i]), fill: "#8a1b1b", stroke: "#16202a", "stroke-dasharray": "2 2" }));
+    }
   });
+  const nReaders = readers.reduce((a, b) => a + b, 0);
+  svg.append(s("text", { x: W - R - 4, y: 14, "text-anchor": "end" }, `people per bin; light: cannot read it, dark and outlined: reads it (${nReaders} in all)`));
   svg.append(s("line", { x1: L, y1: H - B, x2: W - R, y2: H - B, stroke: "#16202a" }));
   svg.append(s("line", { x1: L, y1: T, x2: L, y2: H - B, stroke: "#16202a" }));
   for (const v of [0, 0.2, 0.4, 0.6, 0.8, 1]) svg.append(s("text", { x: x(v), y: H - B + 14, "text-anchor": "middle" }, fmt(v, 1)));
