@@ -350,14 +350,7 @@ function profileRow(p, reload) {
       field("New profile file", file),
       h("div", { class: "actions" }, h("button", { type: "submit" }, "Re-enrol")),
     ], async () => {
-      if (!file.files.length) throw new FormError("profile", "choose a file");
-      let parsed;
-      try {
-        parsed = JSON.parse(await file.files[0].text());
-      } catch (e) {
-        throw new FormError("profile", `the file is not JSON (${e.message})`);
-      }
-      const r = await api("PUT", `/v1/profiles/${p.id}`, { json: parsed && parsed.profile ? parsed : { profile: parsed } });
+      const r = await api("PUT", `/v1/profiles/${p.id}`, { json: await profileBody(file) });
       await reload();
       return `Version ${r.version} enrolled.`;
     });
@@ -373,6 +366,18 @@ function profileRow(p, reload) {
     })))), detailRow];
 }
 
+/** An enrolment body from a chosen JSON file: a vision profile, or a whole body {"label", "profile"}. */
+async function profileBody(file) {
+  if (!file.files.length) throw new FormError("profile", "choose a file");
+  let parsed;
+  try {
+    parsed = JSON.parse(await file.files[0].text());
+  } catch (e) {
+    throw new FormError("profile", `the file is not JSON (${e.message})`);
+  }
+  return parsed && parsed.profile ? parsed : { profile: parsed };
+}
+
 function enrolFromFile(reload) {
   const label = h("input", { type: "text", "data-field": "label", maxlength: 200 });
   const file = h("input", { type: "file", accept: "application/json,.json", "data-field": "profile" });
@@ -382,14 +387,7 @@ function enrolFromFile(reload) {
     h("div", { class: "row" }, field("Label", label), field("Profile file", file)),
     h("div", { class: "actions" }, h("button", { type: "submit" }, "Enrol")),
   ], async () => {
-    if (!file.files.length) throw new FormError("profile", "choose a file");
-    let parsed;
-    try {
-      parsed = JSON.parse(await file.files[0].text());
-    } catch (e) {
-      throw new FormError("profile", `the file is not JSON (${e.message})`);
-    }
-    const body = parsed && parsed.profile ? parsed : { profile: parsed };
+    const body = await profileBody(file);
     if (label.value.trim()) body.label = label.value.trim();
     const p = await api("POST", "/v1/profiles", { json: body });
     await reload();
