@@ -140,6 +140,20 @@ fn shots_dir() -> PathBuf {
     dir
 }
 
+/// Every input, select and textarea on the page has a label (or an aria-label), and there are some.
+async fn assert_all_labelled(c: &Client, page: &str) {
+    let counts = c
+        .execute(
+            "const all = [...document.querySelectorAll('input, select, textarea')]; \
+             return [all.length, all.filter(e => !e.labels?.length && !e.getAttribute('aria-label')).map(e => e.outerHTML)];",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert!(counts[0].as_u64().unwrap() > 0, "{page}: no inputs to check");
+    assert_eq!(counts[1], json!([]), "{page}: inputs without a label");
+}
+
 async fn shot(c: &Client, name: &str) {
     c.execute("window.scrollTo(0, 0)", vec![]).await.unwrap();
     // Full page: grow the window to the document's height first.
@@ -229,6 +243,7 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     c.goto(&app.url("/console")).await.unwrap();
     c.wait().for_element(Locator::Css("#sign-in")).await.unwrap();
     shot(&c, "sign-in").await;
+    assert_all_labelled(&c, "sign-in").await;
     type_into(&c, "#token", "eko_not-a-token").await;
     click(&c, "#sign-in button[type=submit]").await;
     wait_until(
@@ -376,6 +391,7 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     )
     .await;
     shot(&c, "profiles").await;
+    assert_all_labelled(&c, "profiles").await;
 
     // A bad value is answered in place, naming the field, and what was typed stays.
     let pupil = input_labelled(&c, "#enrol-form", "Pupil diameter while viewing, mm").await;
@@ -434,6 +450,7 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
         .unwrap();
     assert_eq!(empty_cells, json!(0), "every resolvability figure is shown");
     shot(&c, "displays").await;
+    assert_all_labelled(&c, "displays").await;
 
     // Documents: a rendered PIN slip (the text that does not fit is refused in place first) and an upload
     // with a preview.
@@ -495,10 +512,12 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     )
     .await;
     shot(&c, "documents").await;
+    assert_all_labelled(&c, "documents").await;
 
     // A job: Ada reads the rendered slip, Bob is an observer.
     nav(&c, "jobs").await;
     c.wait().for_element(Locator::Css("#create-job")).await.unwrap();
+    assert_all_labelled(&c, "jobs").await;
     let ids = c
         .execute(
             "const pick = (sel, text) => [...document.querySelectorAll(sel + ' option')].find(o => o.textContent.includes(text)).value; \
@@ -617,15 +636,6 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     assert!(text_of(&c, "main table.audit").await.contains("display.register"));
     shot(&c, "audit").await;
 
-    // Every input has a label.
-    let unlabelled = c
-        .execute(
-            "return [...document.querySelectorAll('input, select, textarea')].filter(e => !e.labels?.length && !e.getAttribute('aria-label')).length",
-            vec![],
-        )
-        .await
-        .unwrap();
-    assert_eq!(unlabelled, json!(0));
     let errors = browser_errors(&c).await;
     assert!(errors.is_empty(), "browser console errors: {errors:#?}");
 

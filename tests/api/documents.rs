@@ -228,8 +228,45 @@ async fn a_document_rendered_from_text_is_the_font_drawn_image_and_bad_layouts_n
         assert_eq!(e["error"]["field"], field, "{e}");
         assert!(e["error"]["message"].as_str().unwrap().contains(words), "{e}");
     }
-    // Display tokens never read a document.
+    let r = app.op_get(&format!("/v1/documents/{id}/image")).await;
+    assert_eq!(r.headers()["x-content-type-options"], "nosniff");
+    // Every read is audited.
+    let audit = expect_json(app.op_get("/v1/audit").await, StatusCode::OK).await;
+    let reads = audit["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["action"] == "document.read")
+        .count();
+    assert_eq!(reads, 3, "{audit}");
+    // Display tokens and operator tokens without `submit` never read or render a document.
     let (_, display) = app.register_display().await;
     let r = app.display_get(&display, &format!("/v1/documents/{id}/image")).await;
     expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
+    for scope in ["enrol", "read-evaluation"] {
+        let made = expect_json(
+            app.op_post("/v1/tokens", &serde_json::json!({ "name": scope, "scopes": [scope] }))
+                .await,
+            StatusCode::CREATED,
+        )
+        .await;
+        let secret = made["secret"].as_str().unwrap();
+        let r = app
+            .client
+            .get(app.url(&format!("/v1/documents/{id}/image")))
+            .bearer_auth(secret)
+            .send()
+            .await
+            .unwrap();
+        expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
+        let r = app
+            .client
+            .post(app.url("/v1/documents/text"))
+            .bearer_auth(secret)
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
+    }
 }

@@ -119,9 +119,11 @@ fn the_schemas_state_the_constraints_the_handlers_enforce() {
     }
 }
 
-/// The patterns the schema gives for names, labels and cursors accept exactly what the handlers accept:
-/// each is compiled and run against the handlers' own checks on texts at the edges (every control and
-/// bidirectional-override character, blanks, other whitespace, ordinary and non-Latin letters).
+/// The patterns the schema gives for names, labels and cursors accept exactly what the handlers accept on the
+/// Basic Multilingual Plane: each is compiled and run against the handlers' own checks on texts at the edges
+/// (every control, format and bidirectional-override character, blanks, other whitespace, ordinary and
+/// non-Latin letters). The handlers also refuse the format characters beyond it (tags, U+E0001…), which a
+/// pattern without the Unicode flag cannot name.
 #[test]
 fn the_schemas_patterns_accept_what_the_handlers_accept() {
     use eyekey::service::routes::{check_name, check_text};
@@ -139,12 +141,20 @@ fn the_schemas_patterns_accept_what_the_handlers_accept() {
         "Тест 終端 ☂".into(),
         "a\u{00A0}b".into(),
         "\u{2003}".into(),
+        "\u{200B}\u{200B}".into(),
+        "\u{FEFF}".into(),
     ];
     let special = (0u32..=0x9F)
         .filter(|c| !(0x20..0x7F).contains(c))
         .chain([
-            0x061C, 0x200E, 0x200F, 0x202A, 0x202B, 0x202C, 0x202D, 0x202E, 0x2066, 0x2067, 0x2068, 0x2069,
+            0x00AD, 0x0600, 0x0605, 0x061C, 0x06DD, 0x070F, 0x180E, 0xFEFF, 0xFFF9, 0xFFFB,
         ])
+        .chain(
+            (0x200B..=0x200F)
+                .chain(0x202A..=0x202E)
+                .chain(0x2060..=0x2064)
+                .chain(0x2066..=0x206F),
+        )
         .map(|c| char::from_u32(c).unwrap());
     for c in special {
         texts.push(format!("name{c}"));
@@ -152,7 +162,8 @@ fn the_schemas_patterns_accept_what_the_handlers_accept() {
     }
     // Around the ordinary characters next to the forbidden ranges.
     for c in [
-        '\u{20}', '\u{7E}', '\u{A0}', '\u{061B}', '\u{200D}', '\u{2029}', '\u{2065}', '\u{206A}',
+        '\u{20}', '\u{7E}', '\u{A0}', '\u{AC}', '\u{AE}', '\u{061B}', '\u{200A}', '\u{2010}', '\u{2029}', '\u{205F}',
+        '\u{2070}', '\u{FEFE}', '\u{FFFC}',
     ] {
         texts.push(format!("x{c}y"));
     }
@@ -190,6 +201,7 @@ fn the_schemas_patterns_accept_what_the_handlers_accept() {
 
     let list = &doc["paths"]["/v1/jobs"]["get"]["parameters"];
     let cursor = list.as_array().unwrap().iter().find(|p| p["name"] == "cursor").unwrap();
+    assert_eq!(cursor["schema"]["pattern"], eyekey::service::store::CURSOR_PATTERN);
     let cursor = compile(&cursor["schema"]["pattern"]);
     let issued = Cursor {
         created_at: 1_764_000_000_000,

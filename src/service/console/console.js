@@ -122,10 +122,20 @@ async function api(method, path, opts = {}) {
   return r.json();
 }
 
+/** Object URLs of the decrypted images on the page, revoked when the page is left or the operator signs out. */
+const imageUrls = new Set();
+
 /** An image from an authorised URL, as an object URL (an <img src> cannot send the token). */
 async function imageUrl(path) {
   const r = await api("GET", path, { raw: true });
-  return URL.createObjectURL(await r.blob());
+  const url = URL.createObjectURL(await r.blob());
+  imageUrls.add(url);
+  return url;
+}
+
+function forgetImages() {
+  for (const url of imageUrls) URL.revokeObjectURL(url);
+  imageUrls.clear();
 }
 
 function authImage(path, alt) {
@@ -275,15 +285,21 @@ function tokenPanel(title, token) {
 const main = () => document.getElementById("main");
 let pageAbort = null;
 
-function render(title, ...content) {
+/** Draws a page, unless the user has moved on since `signal`'s page began (then stops it with an AbortError). */
+function render(signal, title, ...content) {
+  stopIfLeft(signal);
   document.title = `${title} · eyekey console`;
   put(main(), h("h1", {}, title), ...content);
+}
+
+function stopIfLeft(signal) {
+  if (signal.aborted) throw new DOMException("the page was left", "AbortError");
 }
 
 function signInPage(message) {
   const input = h("input", { type: "password", id: "token", name: "token", autocomplete: "off", "data-field": "token", spellcheck: "false" });
   const f = form({ id: "sign-in", "aria-labelledby": "sign-in-title" }, [
-    field("Operator token", input, "The bootstrap token from the service's data directory (operator-token), or one made under Tokens. It stays in this tab only."),
+    field("Operator token", input, "The bootstrap token from the service's data directory (operator-token), or a scoped token made with POST /v1/tokens. It stays in this tab only."),
     h("div", { class: "actions" }, h("button", { type: "submit" }, "Sign in")),
   ], async () => {
     const token = input.value.trim();
@@ -315,11 +331,12 @@ function signInPage(message) {
 // ----- profiles
 
 async function profilesPage() {
-  if (!has("enrol")) return render("Profiles", needs("enrol"));
+  const signal = pageAbort.signal;
+  if (!has("enrol")) return render(signal, "Profiles", needs("enrol"));
   const list = h("div", {}, h("p", {}, "Loading…"));
-  render("Profiles", h("section", {}, h("h2", {}, "Enrolled people"), list), enrolFromFile(reload), enrolForm(reload));
+  render(signal, "Profiles", h("section", {}, h("h2", {}, "Enrolled people"), list), enrolFromFile(reload), enrolForm(reload));
   async function reload() {
-    const items = await allPages("/v1/profiles", 1);
+    const items = await allPages("/v1/profiles", 5);
     put(list, items.length === 0 ? h("p", {}, "Nobody is enrolled yet.") : h("table", { id: "profiles" },
       h("thead", {}, h("tr", {}, h("th", {}, "Label"), h("th", {}, "Id"), h("th", { class: "num" }, "Version"), h("th", {}, "Updated"), h("th", {}, "Actions"))),
       h("tbody", {}, items.map((p) => profileRow(p, reload)))));
@@ -478,12 +495,13 @@ function enrolForm(reload) {
 // ----- displays
 
 async function displaysPage() {
-  if (!has("submit")) return render("Displays", needs("submit"));
+  const signal = pageAbort.signal;
+  if (!has("submit") && !has("read-evaluation")) return render(signal, "Displays", needs("submit or read-evaluation"));
   const list = h("div", {}, h("p", {}, "Loading…"));
   const shown = h("div", { id: "display-token" });
-  render("Displays", shown, h("section", {}, h("h2", {}, "Registered displays"), list), has("admin") ? registerForm(reload, shown) : needs("admin"));
+  render(signal, "Displays", shown, h("section", {}, h("h2", {}, "Registered displays"), list), has("admin") ? registerForm(reload, shown) : needs("admin"));
   async function reload() {
-    const items = await allPages("/v1/displays", 1);
+    const items = await allPages("/v1/displays", 5);
     put(list, items.length === 0 ? h("p", {}, "No display is registered yet.") : h("table", { id: "displays" },
       h("thead", {}, h("tr", {}, h("th", {}, "Name"), h("th", {}, "Frames"), h("th", {}, "Views told apart"), h("th", {}, "Registered"), h("th", {}, "Actions"))),
       h("tbody", {}, items.map((d) => displayRow(d, reload, shown)))));
@@ -577,11 +595,12 @@ function registerForm(reload, shown) {
 // ----- documents
 
 async function documentsPage() {
-  if (!has("submit")) return render("Documents", needs("submit"));
+  const signal = pageAbort.signal;
+  if (!has("submit")) return render(signal, "Documents", needs("submit"));
   const list = h("div", {}, h("p", {}, "Loading…"));
-  render("Documents", uploadForm(reload), renderForm(reload), h("section", {}, h("h2", {}, "Documents"), list));
+  render(signal, "Documents", uploadForm(reload), renderForm(reload), h("section", {}, h("h2", {}, "Documents"), list));
   async function reload() {
-    const items = await allPages("/v1/documents", 1);
+    const items = await allPages("/v1/documents", 5);
     put(list, items.length === 0 ? h("p", {}, "No document yet.") : h("table", { id: "documents" },
       h("thead", {}, h("tr", {}, h("th", {}, "Id"), h("th", {}, "Image"), h("th", {}, "Stored"), h("th", {}, "Actions"))),
       h("tbody", {}, items.map((d) => documentRow(d, reload)))));
@@ -609,7 +628,11 @@ function uploadForm(reload) {
   const preview = h("div", {});
   file.addEventListener("change", () => {
     put(preview, );
-    if (file.files.length) preview.append(h("img", { class: "preview", alt: "Preview of the chosen image", src: URL.createObjectURL(file.files[0]) }));
+    if (file.files.length) {
+      const url = URL.createObjectURL(file.files[0]);
+      imageUrls.add(url);
+      preview.append(h("img", { class: "preview", alt: "Preview of the chosen image", src: url }));
+    }
   });
   return form({ id: "upload-document", "aria-label": "Upload a document" }, [
     h("h2", {}, "Upload a document"),
@@ -658,10 +681,10 @@ function renderForm(reload) {
 const TERMINAL = ["succeeded", "failed", "cancelled"];
 
 async function jobsPage() {
-  if (!has("submit") && !has("read-evaluation")) return render("Jobs", needs("submit or read-evaluation"));
-  const list = h("div", {}, h("p", {}, "Loading…"));
-  render("Jobs", has("submit") ? await jobForm() : null, h("section", {}, h("h2", {}, "Jobs"), list));
   const signal = pageAbort.signal;
+  if (!has("submit") && !has("read-evaluation")) return render(signal, "Jobs", needs("submit or read-evaluation"));
+  const list = h("div", {}, h("p", {}, "Loading…"));
+  render(signal, "Jobs", has("submit") ? await jobForm() : null, h("section", {}, h("h2", {}, "Jobs"), list));
   async function reload() {
     const page = await api("GET", "/v1/jobs?limit=50");
     put(list, page.items.length === 0 ? h("p", {}, "No job yet.") : h("table", { id: "jobs" },
@@ -715,9 +738,9 @@ function cancelButton(j, reload) {
 
 async function jobForm() {
   const [profiles, displays, documents] = await Promise.all([
-    has("enrol") ? allPages("/v1/profiles", 1) : Promise.resolve(null),
-    allPages("/v1/displays", 1),
-    allPages("/v1/documents", 1),
+    has("enrol") ? allPages("/v1/profiles", 5) : Promise.resolve(null),
+    allPages("/v1/displays", 5),
+    allPages("/v1/documents", 5),
   ]);
   const choose = (items, fieldName, labelOf, optional) => h("select", { "data-field": fieldName },
     optional ? h("option", { value: "" }, "none") : null,
@@ -771,12 +794,12 @@ async function jobForm() {
 }
 
 async function jobPage(id) {
-  if (!has("submit") && !has("read-evaluation")) return render("Job", needs("submit or read-evaluation"));
   const signal = pageAbort.signal;
+  if (!has("submit") && !has("read-evaluation")) return render(signal, "Job", needs("submit or read-evaluation"));
   const status = h("section", { class: "card", id: "job-status", "aria-live": "polite" }, "Loading…");
   const results = h("div", { id: "job-results" });
   const audit = h("section", { id: "job-audit" });
-  render(`Job ${short(id)}`, status, results, audit);
+  render(signal, `Job ${short(id)}`, status, results, audit);
   const labels = await profileLabels();
   const who = (profileId, version) => `${labels[profileId] ? `${labels[profileId]}: ` : ""}${profileId} (version ${version})`;
   let job = await api("GET", `/v1/jobs/${id}`);
@@ -977,9 +1000,10 @@ function auditTable(entries) {
 }
 
 async function auditPage() {
-  if (!has("admin")) return render("Audit log", needs("admin"));
+  const signal = pageAbort.signal;
+  if (!has("admin")) return render(signal, "Audit log", needs("admin"));
   const entries = await allPages("/v1/audit", 1);
-  render("Audit log", h("p", {}, `The latest ${entries.length} entries, newest first.`), auditTable(entries));
+  render(signal, "Audit log", h("p", {}, `The latest ${entries.length} entries, newest first.`), auditTable(entries));
 }
 
 // ---------------------------------------------------------------- routing and chrome
@@ -1003,6 +1027,7 @@ function signOut(message) {
   session.me = null;
   sessionStorage.removeItem(TOKEN_KEY);
   if (pageAbort) pageAbort.abort();
+  forgetImages();
   history.replaceState(null, "", "/console/sign-in");
   signInPage(message || "Signed out. The token is forgotten by this tab.");
 }
@@ -1016,6 +1041,8 @@ function navigate(path, replace) {
 async function route() {
   if (pageAbort) pageAbort.abort();
   pageAbort = new AbortController();
+  const signal = pageAbort.signal;
+  forgetImages();
   if (!session.token) return signInPage();
   updateChrome();
   const parts = location.pathname.replace(/\/+$/, "").split("/").slice(2);
@@ -1024,10 +1051,10 @@ async function route() {
     if (parts[0] === "jobs" && parts[1]) await jobPage(parts[1]);
     else if (pages[parts[0]]) await pages[parts[0]]();
     else if (parts.length === 0 || parts[0] === "sign-in") return navigate("/console/jobs", true);
-    else render("Not found", h("p", {}, "There is no such page in the console."), h("a", { href: "/console/jobs" }, "Go to the jobs"));
-    main().focus();
+    else render(signal, "Not found", h("p", {}, "There is no such page in the console."), h("a", { href: "/console/jobs" }, "Go to the jobs"));
+    if (!signal.aborted) main().focus();
   } catch (e) {
-    if (e.name === "AbortError") return;
+    if (e.name === "AbortError" || signal.aborted) return;
     main().append(h("p", { class: "error", role: "alert" }, e.message));
   }
 }
@@ -1047,8 +1074,9 @@ document.addEventListener("DOMContentLoaded", async () => {
     try {
       session.me = await api("GET", "/v1/me", { token: saved });
       session.token = saved;
-    } catch (_) {
-      sessionStorage.removeItem(TOKEN_KEY);
+    } catch (e) {
+      if (e.status === 401 || e.status === 403) sessionStorage.removeItem(TOKEN_KEY);
+      else return signInPage(`The service could not be reached (${e.message}); sign in again when it is back.`);
     }
   }
   route();

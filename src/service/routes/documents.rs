@@ -287,17 +287,16 @@ pub async fn render_document(
     op: Operator<scope::Submit>,
     ApiJson(body): ApiJson<RenderDocument>,
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
-    let image = body.render(state.config.limits.max_document_pixels)?;
-    let (width, height) = image.dimensions();
-    let png = tokio::task::spawn_blocking(move || {
+    let max_pixels = state.config.limits.max_document_pixels;
+    let (png, width, height) = tokio::task::spawn_blocking(move || {
+        let image = body.render(max_pixels)?;
+        let (width, height) = image.dimensions();
         let mut png = std::io::Cursor::new(Vec::new());
-        image
-            .write_to(&mut png, image::ImageFormat::Png)
-            .map(|()| png.into_inner())
+        image.write_to(&mut png, image::ImageFormat::Png).map_err(internal)?;
+        Ok::<_, ApiError>((png.into_inner(), width, height))
     })
     .await
-    .map_err(internal)?
-    .map_err(internal)?;
+    .map_err(internal)??;
     store_new(
         &state,
         &op,
@@ -367,7 +366,8 @@ pub async fn get_document(
     Ok(Json(DocumentView::from(&row)))
 }
 
-/// Read a document's image, as uploaded (or rendered), opened from its sealed file.
+/// Read a document's image, as uploaded (or rendered), opened from its sealed file. Every read is audited
+/// (`document.read`).
 #[utoipa::path(
     get, path = "/v1/documents/{id}/image", tag = "documents",
     params(("id" = Uuid, Path, description = "Document id")),
@@ -380,7 +380,7 @@ pub async fn get_document(
 )]
 pub async fn get_document_image(
     State(state): State<AppState>,
-    _op: Operator<scope::Submit>,
+    op: Operator<scope::Submit>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<axum::response::Response, ApiError> {
     let row = store::documents::get(&state.db, &id_text(&id))
@@ -392,11 +392,22 @@ pub async fn get_document_image(
         Err(sealed::OpenError::Io(e)) => return Err(ApiError::from_io(e)),
         Err(e) => return Err(internal(anyhow::anyhow!("document {}: {e}", row.id))),
     };
+    store::audit::record(
+        &state.writer,
+        &op.actor(),
+        "document.read",
+        &format!("documents/{}", row.id),
+    )
+    .await?;
     let content_type = axum::http::HeaderValue::from_str(&row.content_type).map_err(internal)?;
     Ok((
         [
             (header::CONTENT_TYPE, content_type),
             (header::CACHE_CONTROL, axum::http::HeaderValue::from_static("no-store")),
+            (
+                header::X_CONTENT_TYPE_OPTIONS,
+                axum::http::HeaderValue::from_static("nosniff"),
+            ),
         ],
         bytes,
     )

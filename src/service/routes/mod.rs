@@ -95,13 +95,11 @@ pub fn check_text(field: &str, value: &str, max: usize) -> Result<(), ApiError> 
             format!("{field} must be at most {max} characters"),
         ));
     }
-    let bidi =
-        |c: char| matches!(c, '\u{061C}' | '\u{200E}' | '\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}');
-    if let Some(c) = value.chars().find(|&c| c.is_control() || bidi(c)) {
+    if let Some(c) = value.chars().find(|&c| c.is_control() || is_format(c)) {
         return Err(ApiError::invalid(
             field,
             format!(
-                "{field} must not contain control or bidirectional-override characters (found U+{:04X})",
+                "{field} must not contain control, format or bidirectional-override characters (found U+{:04X})",
                 c as u32
             ),
         ));
@@ -121,6 +119,16 @@ pub fn check_name<'a>(field: &str, value: &'a str, max: usize) -> Result<&'a str
         ));
     }
     Ok(name)
+}
+
+/// Unicode format characters (category Cf): invisible, and the bidirectional overrides among them can make a log
+/// line or a page show something other than what is stored; a name of zero-width spaces would look blank.
+fn is_format(c: char) -> bool {
+    matches!(c,
+        '\u{00AD}' | '\u{0600}'..='\u{0605}' | '\u{061C}' | '\u{06DD}' | '\u{070F}' | '\u{180E}'
+        | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{206F}'
+        | '\u{FEFF}' | '\u{FFF9}'..='\u{FFFB}' | '\u{110BD}' | '\u{110CD}' | '\u{13430}'..='\u{1343F}'
+        | '\u{1BCA0}'..='\u{1BCA3}' | '\u{1D173}'..='\u{1D17A}' | '\u{E0001}' | '\u{E0020}'..='\u{E007F}')
 }
 
 /// The stored (hyphenated) form of an id.

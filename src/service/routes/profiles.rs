@@ -33,7 +33,7 @@ pub struct EnrolProfile {
     /// On re-enrolment, omitted keeps the old one.
     #[schema(
         max_length = 200,
-        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u061C\u200E\u200F\u202A-\u202E\u2066-\u2069]*$"
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F\u00AD\u0600-\u0605\u061C\u06DD\u070F\u180E\u200B-\u200F\u202A-\u202E\u2060-\u2064\u2066-\u206F\uFEFF\uFFF9-\uFFFB]*$"
     )]
     pub label: Option<String>,
     /// The person's vision profile.
