@@ -186,3 +186,68 @@ async fn every_frame_download_is_audited_with_the_display_as_actor() {
         );
     }
 }
+
+/// `?resource=jobs/<id>` gives that job's entries and those under it (its frame downloads), and nothing of
+/// another job, even one whose id shares the prefix's first characters; a malformed resource is a 422.
+#[tokio::test]
+async fn the_audit_log_filters_by_resource_and_what_lies_under_it() {
+    let app = spawn_app().await;
+    let f = app.fixtures().await;
+    let first = app.create_job(&f).await["id"].as_str().unwrap().to_string();
+    let second = app.create_job(&f).await["id"].as_str().unwrap().to_string();
+    let job_id = app.complete_with_fake_bundle().await;
+    let other = if job_id == first { second } else { first };
+    let r = app
+        .display_get(&f.display_token, &format!("/v1/frames/jobs/{job_id}/bundle.zip"))
+        .await;
+    assert_eq!(r.status(), StatusCode::OK);
+    let filtered = |resource: String| {
+        let app = &app;
+        async move {
+            let page = expect_json(
+                app.op_get(&format!("/v1/audit?resource={resource}")).await,
+                StatusCode::OK,
+            )
+            .await;
+            page["items"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|e| {
+                    (
+                        e["action"].as_str().unwrap().to_string(),
+                        e["resource"].as_str().unwrap().to_string(),
+                    )
+                })
+                .collect::<Vec<_>>()
+        }
+    };
+    let mine = filtered(format!("jobs/{job_id}")).await;
+    assert!(
+        mine.contains(&("job.create".into(), format!("jobs/{job_id}"))),
+        "{mine:?}"
+    );
+    assert!(
+        mine.contains(&("frames.download".into(), format!("jobs/{job_id}/bundle.zip"))),
+        "{mine:?}"
+    );
+    assert!(
+        mine.iter()
+            .all(|(_, r)| r == &format!("jobs/{job_id}") || r.starts_with(&format!("jobs/{job_id}/"))),
+        "{mine:?}"
+    );
+    let theirs = filtered(format!("jobs/{other}")).await;
+    assert_eq!(theirs, vec![("job.create".to_string(), format!("jobs/{other}"))]);
+    // A prefix of an id is not the id: nothing matches.
+    assert!(filtered(format!("jobs/{}", &job_id[..8])).await.is_empty());
+    let all_jobs = filtered("jobs".into()).await;
+    assert!(
+        all_jobs.len() >= 3 && all_jobs.iter().all(|(_, r)| r.starts_with("jobs/")),
+        "{all_jobs:?}"
+    );
+    for bad in ["Jobs/x", "jobs//x", "/jobs", "jobs/%25", "jobs/x y"] {
+        let r = app.op_get(&format!("/v1/audit?resource={bad}")).await;
+        let e = expect_error(r, StatusCode::UNPROCESSABLE_ENTITY, "invalid").await;
+        assert_eq!(e["field"], "resource", "{bad}: {e}");
+    }
+}

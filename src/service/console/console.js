@@ -989,7 +989,7 @@ function populationPlot(people, threshold, target) {
 }
 
 async function showAudit(id, section) {
-  const entries = (await allPages("/v1/audit", 5)).filter((e) => e.resource.includes(id));
+  const entries = await allPages(`/v1/audit?resource=${encodeURIComponent(`jobs/${id}`)}`, 5);
   put(section, h("h2", {}, "Audit log of this job"), entries.length === 0 ? h("p", {}, "No entry.") : auditTable(entries));
 }
 

@@ -41,10 +41,27 @@ pub struct AuditList {
     pub next_cursor: Option<String>,
 }
 
+/// `?limit=&cursor=&resource=` of the audit log.
+#[derive(Debug, Default, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct AuditQuery {
+    /// Items per page (1–200, default 50).
+    #[param(minimum = 1, maximum = 200)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page, as the service returned it: `<created_at>.<id>` of the last item
+    /// seen.
+    #[param(pattern = r"^[0-9]{1,18}\.[0-9a-z-]{1,36}$")]
+    pub cursor: Option<String>,
+    /// Only entries about this resource and what lies under it: `jobs/<id>` gives the job's entries and its
+    /// frame downloads (`jobs/<id>/…`).
+    #[param(max_length = 200, pattern = r"^[a-z]+(/[0-9a-z._-]+)*$")]
+    pub resource: Option<String>,
+}
+
 /// Read the audit log, newest first: who did what to which resource and when (never profile contents).
 #[utoipa::path(
     get, path = "/v1/audit", tag = "audit",
-    params(PageQuery),
+    params(AuditQuery),
     responses(
         (status = 200, description = "A page of entries", body = AuditList),
         (status = 401, description = "No or unknown token", body = ErrorBody),
@@ -54,10 +71,31 @@ pub struct AuditList {
 pub async fn list_audit(
     State(state): State<AppState>,
     _op: Operator<scope::Admin>,
-    ApiQuery(page): ApiQuery<PageQuery>,
+    ApiQuery(query): ApiQuery<AuditQuery>,
 ) -> Result<Json<AuditList>, ApiError> {
+    let page = PageQuery {
+        limit: query.limit,
+        cursor: query.cursor,
+    };
     let (limit, cursor) = page.parse()?;
-    let rows = store::audit::list(&state.db, limit, cursor.as_ref()).await?;
+    if let Some(resource) = &query.resource {
+        let segment_ok = |s: &str| {
+            !s.is_empty()
+                && s.bytes()
+                    .all(|b| b.is_ascii_digit() || b.is_ascii_lowercase() || b"._-".contains(&b))
+        };
+        let mut parts = resource.split('/');
+        let head_ok = parts
+            .next()
+            .is_some_and(|h| !h.is_empty() && h.bytes().all(|b| b.is_ascii_lowercase()));
+        if resource.len() > 200 || !head_ok || !parts.all(segment_ok) {
+            return Err(ApiError::invalid(
+                "resource",
+                "a resource is a kind and path segments, e.g. `jobs/<id>`",
+            ));
+        }
+    }
+    let rows = store::audit::list(&state.db, limit, cursor.as_ref(), query.resource.as_deref()).await?;
     let next_cursor = (rows.len() == limit as usize)
         .then(|| {
             rows.last().map(|r| {

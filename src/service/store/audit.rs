@@ -32,14 +32,33 @@ pub async fn record(writer: &Writer, actor: &str, action: &str, resource: &str) 
     Ok(())
 }
 
-/// Entries newest first, after `cursor` (whose `id` is the sequence number).
-pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<AuditRow>, sqlx::Error> {
+/// Entries newest first, after `cursor` (whose `id` is the sequence number); with `resource`, only those about
+/// it or about what lies under it (`resource/…`).
+pub async fn list(
+    pool: &SqlitePool,
+    limit: u32,
+    cursor: Option<&Cursor>,
+    resource: Option<&str>,
+) -> Result<Vec<AuditRow>, sqlx::Error> {
     let before = cursor.and_then(|c| c.id.parse::<i64>().ok()).unwrap_or(i64::MAX);
-    sqlx::query_as::<_, AuditRow>(
-        "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < ? ORDER BY id DESC LIMIT ?",
-    )
-    .bind(before)
-    .bind(limit as i64)
+    match resource {
+        None => sqlx::query_as::<_, AuditRow>(
+            "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < ? ORDER BY id DESC LIMIT ?",
+        )
+        .bind(before)
+        .bind(limit as i64),
+        // `r/…` are the texts from `r/` up to, not including, `r0` ('0' follows '/' in ASCII): a prefix match
+        // that needs no LIKE escaping.
+        Some(r) => sqlx::query_as::<_, AuditRow>(
+            "SELECT id, actor, action, resource, created_at FROM audit_log \
+             WHERE id < ? AND (resource = ? OR (resource >= ? AND resource < ?)) ORDER BY id DESC LIMIT ?",
+        )
+        .bind(before)
+        .bind(r)
+        .bind(format!("{r}/"))
+        .bind(format!("{r}0"))
+        .bind(limit as i64),
+    }
     .fetch_all(pool)
     .await
 }
