@@ -6,11 +6,11 @@ use axum::{Json, Router};
 use chrono::{DateTime, Utc};
 use serde::{Deserialize, Serialize};
 
-use super::PageQuery;
+use super::{next_cursor, PageQuery};
 use crate::service::auth::{scope, Operator};
 use crate::service::error::{ApiError, ApiQuery, ErrorBody};
 use crate::service::state::AppState;
-use crate::service::store::{self, to_time, Cursor};
+use crate::service::store::{self, to_time};
 
 /// Routes of this resource.
 pub fn router() -> Router<AppState> {
@@ -41,17 +41,10 @@ pub struct AuditList {
     pub next_cursor: Option<String>,
 }
 
-/// `?limit=&cursor=&resource=` of the audit log.
+/// `?resource=` of the audit log (beside the page's `?limit=&cursor=`).
 #[derive(Debug, Default, Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
-pub struct AuditQuery {
-    /// Items per page (1–200, default 50).
-    #[param(minimum = 1, maximum = 200)]
-    pub limit: Option<u32>,
-    /// `next_cursor` of the previous page, as the service returned it: `<created_at>.<id>` of the last item
-    /// seen.
-    #[param(pattern = r"^[0-9]{1,18}\.[0-9a-z-]{1,36}$")]
-    pub cursor: Option<String>,
+pub struct ResourceFilter {
     /// Only entries about this resource and what lies under it: `jobs/<id>` gives the job's entries and its
     /// frame downloads (`jobs/<id>/…`).
     #[param(max_length = 200, pattern = r"^[a-z]+(/[0-9a-z._-]+)*$")]
@@ -61,7 +54,7 @@ pub struct AuditQuery {
 /// Read the audit log, newest first: who did what to which resource and when (never profile contents).
 #[utoipa::path(
     get, path = "/v1/audit", tag = "audit",
-    params(AuditQuery),
+    params(PageQuery, ResourceFilter),
     responses(
         (status = 200, description = "A page of entries", body = AuditList),
         (status = 401, description = "No or unknown token", body = ErrorBody),
@@ -71,14 +64,11 @@ pub struct AuditQuery {
 pub async fn list_audit(
     State(state): State<AppState>,
     _op: Operator<scope::Admin>,
-    ApiQuery(query): ApiQuery<AuditQuery>,
+    ApiQuery(page): ApiQuery<PageQuery>,
+    ApiQuery(filter): ApiQuery<ResourceFilter>,
 ) -> Result<Json<AuditList>, ApiError> {
-    let page = PageQuery {
-        limit: query.limit,
-        cursor: query.cursor,
-    };
     let (limit, cursor) = page.parse()?;
-    if let Some(resource) = &query.resource {
+    if let Some(resource) = &filter.resource {
         let segment_ok = |s: &str| {
             !s.is_empty()
                 && s.bytes()
@@ -95,18 +85,8 @@ pub async fn list_audit(
             ));
         }
     }
-    let rows = store::audit::list(&state.db, limit, cursor.as_ref(), query.resource.as_deref()).await?;
-    let next_cursor = (rows.len() == limit as usize)
-        .then(|| {
-            rows.last().map(|r| {
-                Cursor {
-                    created_at: r.created_at,
-                    id: r.id.to_string(),
-                }
-                .encode()
-            })
-        })
-        .flatten();
+    let rows = store::audit::list(&state.db, limit, cursor.as_ref(), filter.resource.as_deref()).await?;
+    let next_cursor = next_cursor(&rows, limit, |r| (r.created_at, r.id.to_string()));
     Ok(Json(AuditList {
         items: rows
             .into_iter()
