@@ -43,8 +43,11 @@ pub enum Command {
     /// Experiments: the paper's §7.3, a design-space sweep, the secure preset's evaluation.
     #[command(subcommand)]
     Experiment(ExperimentCommand),
-    /// Run the REST service (embedded SQLite, durable job queue, frame bundles for registered displays).
+    /// Run the REST service (embedded SQLite or PostgreSQL, durable job queue, frame bundles for
+    /// registered displays).
     Serve(crate::service::ServeArgs),
+    /// Run job workers with no API, on a PostgreSQL database shared with `eyekey serve` processes.
+    Worker(crate::service::WorkerArgs),
     /// Run a display client: fetch this display's newest frame bundle, verify it and install it into
     /// `<out>/current/`, once or following the server's events.
     DisplayClient(crate::client::DisplayClientArgs),
@@ -504,6 +507,11 @@ pub fn run(cli: Cli) -> Result<()> {
             init_tracing();
             let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
             rt.block_on(crate::service::serve(args))?;
+        }
+        Command::Worker(args) => {
+            init_tracing();
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(crate::service::worker(args))?;
         }
         Command::DisplayClient(args) => {
             init_tracing();

@@ -57,47 +57,8 @@ impl ShutdownHandle {
 impl Application {
     /// Resolves secrets, opens and migrates the database, binds the listener (port 0 picks a free port).
     pub async fn build(config: Config) -> anyhow::Result<Self> {
-        let data_dir = config.data_dir.clone();
-        for sub in ["", "documents", "jobs"] {
-            tokio::fs::create_dir_all(data_dir.join(sub))
-                .await
-                .with_context(|| format!("creating {}", data_dir.join(sub).display()))?;
-        }
-        restrict_dir(&data_dir);
-        let lock = lock_data_dir(&data_dir)?;
-
-        let (operator_token, operator_token_file) = match &config.operator_token {
-            Some(t) => (t.clone(), None),
-            None => {
-                let path = data_dir.join(OPERATOR_TOKEN_FILE);
-                let token = read_or_create_secret(&path, "operator token", || generate_token("eko_"))?;
-                (token, Some(path))
-            }
-        };
-        let master_key = match &config.master_key_hex {
-            Some(k) => MasterKey::from_hex(k).context("the master key given by --master-key or EYEKEY_MASTER_KEY")?,
-            None => {
-                let path = data_dir.join(MASTER_KEY_FILE);
-                if !path.exists() && config.database_path().exists() {
-                    anyhow::bail!(
-                        "{} holds sealed data but {} is missing: restore the master key from its backup (or give \
-                         it with EYEKEY_MASTER_KEY); a new key could not open what is stored",
-                        data_dir.display(),
-                        path.display()
-                    );
-                }
-                let text = read_or_create_secret(&path, "master key", MasterKey::generate_hex)?;
-                MasterKey::from_hex(&text).with_context(|| format!("the master key in {}", path.display()))?
-            }
-        };
-
-        let (db, writer) = store::connect(&config.database_path())
-            .await
-            .with_context(|| format!("opening {}", config.database_path().display()))?;
-        store::migrate(&writer).await.context("applying database migrations")?;
-        store::check_master_key(&writer, &master_key).await?;
-        tracing::info!(database = %config.database_path().display(), "database ready");
-
+        let opened = open(config, Role::Api).await?;
+        let config = &opened.state.config;
         let tls = match &config.tls {
             Some((cert, key)) => Some(super::listener::tls_acceptor(cert, key)?),
             None if !config.bind.ip().is_loopback() && !config.insecure_http => anyhow::bail!(
@@ -110,40 +71,36 @@ impl Application {
         let listener = TcpListener::bind(config.bind)
             .await
             .with_context(|| format!("binding {}", config.bind))?;
-        let (shutdown_tx, shutdown_rx) = watch::channel(false);
-        let state = AppState(Arc::new(Inner {
-            db,
-            writer,
-            operator_token_hash: token_hash(&operator_token),
-            master_key,
-            events: broadcast::channel(1024).0,
-            job_queued: Notify::new(),
-            shutdown: shutdown_rx,
-            instance_id: uuid::Uuid::new_v4().to_string(),
-            metrics: routes::metrics::recorder(),
-            transport_cache: Arc::new(TransportCache::new(config.transport_cache_bytes)),
-            display_warnings: Default::default(),
-            config,
-        }));
-        // Before any worker or request: seal what an older version stored in clear, then sweep leftovers.
-        let (docs, jobs) = super::retention::seal_unsealed(&state)
-            .await
-            .context("sealing stored data")?;
-        if docs + jobs > 0 {
-            tracing::info!(documents = docs, jobs, "sealed data stored before sealing");
+        let state = opened.state;
+        // Before any worker or request: seal what an older version stored in clear, then sweep leftovers
+        // (files under the data directory; with PostgreSQL there are neither).
+        if matches!(state.objects, store::objects::Objects::Dir(_)) {
+            let (docs, jobs) = super::retention::seal_unsealed(&state)
+                .await
+                .context("sealing stored data")?;
+            if docs + jobs > 0 {
+                tracing::info!(documents = docs, jobs, "sealed data stored before sealing");
+            }
+            super::retention::sweep(&state)
+                .await
+                .context("sweeping leftovers in the data directory")?;
+        } else {
+            let removed = super::retention::sweep_objects(&state)
+                .await
+                .context("sweeping the objects of deleted data")?;
+            if removed > 0 {
+                tracing::info!(objects = removed, "removed the objects of deleted data");
+            }
         }
-        super::retention::sweep(&state)
-            .await
-            .context("sweeping leftovers in the data directory")?;
         let router = router(state.clone());
         Ok(Self {
             listener,
             router,
             state,
-            shutdown: ShutdownHandle(Arc::new(shutdown_tx)),
-            operator_token_file,
+            shutdown: opened.shutdown,
+            operator_token_file: opened.operator_token_file,
             tls,
-            _lock: lock,
+            _lock: opened.lock,
         })
     }
 
@@ -202,6 +159,7 @@ impl Application {
         tracing::info!(
             "operator console at {scheme}://{address}/console (sign in with the operator token), API documentation at {scheme}://{address}/docs"
         );
+        let feed = spawn_feed(&state);
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
         let retention = super::retention::spawn_retention(&state);
 
@@ -223,21 +181,233 @@ impl Application {
         .context("serving HTTP")?;
 
         shutdown.shutdown();
-        let grace = state.config.queue.shutdown_grace;
-        let drained = tokio::time::timeout(grace, async { while workers.join_next().await.is_some() {} }).await;
-        if drained.is_err() {
-            tracing::warn!(
-                ?grace,
-                "workers did not stop in time; their jobs will be re-claimed after the lease"
-            );
-            workers.abort_all();
-        }
+        drain_workers(&state, &mut workers).await;
         retention.abort();
+        if let Some(feed) = feed {
+            feed.abort();
+        }
         state.db.close().await;
         state.writer.0.close().await;
         drop(lock);
         tracing::info!("eyekey stopped");
         Ok(())
+    }
+}
+
+/// Which kind of process is opening the service's state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    /// `eyekey serve`: applies the migrations.
+    Api,
+    /// `eyekey worker`: waits until an API process has applied them.
+    Worker,
+}
+
+/// What [`open`] prepared: the shared state and what the process must hold while it runs.
+struct Opened {
+    state: AppState,
+    shutdown: ShutdownHandle,
+    operator_token_file: Option<PathBuf>,
+    lock: std::fs::File,
+}
+
+/// The start of every process: the data directory and its lock, the database (migrated by an API process,
+/// awaited by a worker), the secrets, and the shared state.
+async fn open(config: Config, role: Role) -> anyhow::Result<Opened> {
+    let data_dir = config.data_dir.clone();
+    let location = config.database_location();
+    let backend = location.backend();
+    let subdirs: &[&str] = match backend {
+        store::Backend::Sqlite => &["", "documents", "jobs"],
+        store::Backend::Postgres => &[""],
+    };
+    for sub in subdirs {
+        tokio::fs::create_dir_all(data_dir.join(sub))
+            .await
+            .with_context(|| format!("creating {}", data_dir.join(sub).display()))?;
+    }
+    restrict_dir(&data_dir);
+    let lock = lock_data_dir(&data_dir)?;
+
+    let (operator_token, operator_token_file) = match &config.operator_token {
+        Some(t) => (t.clone(), None),
+        // A worker serves no request: no operator token to keep.
+        None if role == Role::Worker => (generate_token("eko_"), None),
+        None => {
+            let path = data_dir.join(OPERATOR_TOKEN_FILE);
+            let token = read_or_create_secret(&path, "operator token", || generate_token("eko_"))?;
+            (token, Some(path))
+        }
+    };
+    if config.master_key_hex.is_none() {
+        let path = data_dir.join(MASTER_KEY_FILE);
+        if !path.exists() && config.database.is_none() && config.database_path().exists() {
+            anyhow::bail!(
+                "{} holds sealed data but {} is missing: restore the master key from its backup (or give \
+                 it with EYEKEY_MASTER_KEY); a new key could not open what is stored",
+                data_dir.display(),
+                path.display()
+            );
+        }
+    }
+
+    let (db, writer) = match role {
+        Role::Api => {
+            let (db, writer) = store::connect(&location)
+                .await
+                .with_context(|| format!("opening the database {location}"))?;
+            store::migrate(&writer).await.context("applying database migrations")?;
+            (db, writer)
+        }
+        Role::Worker => wait_for_schema(&location).await,
+    };
+    let master_key = match &config.master_key_hex {
+        Some(k) => MasterKey::from_hex(k).context("the master key given by --master-key or EYEKEY_MASTER_KEY")?,
+        None => {
+            let path = data_dir.join(MASTER_KEY_FILE);
+            if !path.exists() && store::holds_master_key_check(&writer).await? {
+                anyhow::bail!(
+                    "the database {location} holds data sealed under a master key, and {} is missing: give \
+                     the key every eyekey process shares with EYEKEY_MASTER_KEY (or restore the file from its \
+                     backup); a new key could not open what is stored",
+                    path.display()
+                );
+            }
+            let text = read_or_create_secret(&path, "master key", MasterKey::generate_hex)?;
+            MasterKey::from_hex(&text).with_context(|| format!("the master key in {}", path.display()))?
+        }
+    };
+    store::check_master_key(&writer, &master_key).await?;
+    tracing::info!(database = %location, "database ready");
+
+    let objects = match backend {
+        store::Backend::Sqlite => store::objects::Objects::Dir(data_dir.clone()),
+        store::Backend::Postgres => store::objects::Objects::Database(writer.clone()),
+    };
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let state = AppState(Arc::new(Inner {
+        db,
+        writer,
+        objects,
+        operator_token_hash: token_hash(&operator_token),
+        master_key,
+        events: broadcast::channel(1024).0,
+        job_queued: Notify::new(),
+        shutdown: shutdown_rx,
+        instance_id: uuid::Uuid::new_v4().to_string(),
+        metrics: routes::metrics::recorder(),
+        transport_cache: Arc::new(TransportCache::new(config.transport_cache_bytes)),
+        display_warnings: Default::default(),
+        config,
+    }));
+    Ok(Opened {
+        state,
+        shutdown: ShutdownHandle(Arc::new(shutdown_tx)),
+        operator_token_file,
+        lock,
+    })
+}
+
+/// Connects and waits until every migration this binary knows is applied (by an API process), retrying
+/// with backoff (0.5 s doubling to 10 s) while the database is unreachable or behind, and saying why.
+async fn wait_for_schema(location: &store::Location) -> (sqlx::AnyPool, store::Writer) {
+    let mut wait = std::time::Duration::from_millis(500);
+    loop {
+        let why = match store::connect(location).await {
+            Ok((db, writer)) => match store::migrations_applied(&db).await {
+                Ok(true) => return (db, writer),
+                Ok(false) => "an API process (eyekey serve) has not yet applied every migration".to_string(),
+                Err(e) if e.as_database_error().is_some() => {
+                    format!("no schema yet (eyekey serve applies it): {e}")
+                }
+                Err(e) => format!("{e}"),
+            },
+            Err(e) => format!("cannot connect: {e}"),
+        };
+        tracing::info!(database = %location, reason = %why, retry_in = ?wait, "waiting for the database");
+        tokio::time::sleep(wait).await;
+        wait = (wait * 2).min(std::time::Duration::from_secs(10));
+    }
+}
+
+/// `eyekey worker`: job workers with no API, on the database of `--database-url`.
+pub struct WorkerProcess {
+    state: AppState,
+    shutdown: ShutdownHandle,
+    _lock: std::fs::File,
+}
+
+impl WorkerProcess {
+    /// Opens the state; waits for the database and its schema (it never migrates: API processes do).
+    pub async fn build(config: Config) -> anyhow::Result<Self> {
+        anyhow::ensure!(config.workers > 0, "a worker process needs --workers 1 or more");
+        anyhow::ensure!(
+            config.database_location().backend() == store::Backend::Postgres,
+            "eyekey worker runs beside API processes on a shared PostgreSQL database: give --database-url \
+             postgres://… (with SQLite, the workers run inside eyekey serve)"
+        );
+        let opened = open(config, Role::Worker).await?;
+        Ok(Self {
+            state: opened.state,
+            shutdown: opened.shutdown,
+            _lock: opened.lock,
+        })
+    }
+
+    /// The shared state.
+    pub fn state(&self) -> AppState {
+        self.state.clone()
+    }
+
+    /// A handle that stops the workers.
+    pub fn shutdown_handle(&self) -> ShutdownHandle {
+        self.shutdown.clone()
+    }
+
+    /// Runs the workers until SIGINT, SIGTERM or [`ShutdownHandle::shutdown`]; on shutdown running jobs are
+    /// re-queued without counting the attempt, as in `serve`.
+    pub async fn run_until_stopped(self) -> anyhow::Result<()> {
+        let Self { state, shutdown, _lock } = self;
+        tracing::info!(workers = state.config.workers, instance = %state.instance_id, "eyekey worker running");
+        let feed = spawn_feed(&state);
+        let mut workers = jobs::spawn_workers(&state, state.config.workers);
+        let signal_shutdown = shutdown.clone();
+        tokio::spawn(async move {
+            stop_signal().await;
+            tracing::info!("shutdown signal received");
+            signal_shutdown.shutdown();
+        });
+        let mut stopped = state.shutdown.clone();
+        crate::service::state::stopped(&mut stopped).await;
+        drain_workers(&state, &mut workers).await;
+        if let Some(feed) = feed {
+            feed.abort();
+        }
+        state.db.close().await;
+        state.writer.0.close().await;
+        tracing::info!("eyekey worker stopped");
+        Ok(())
+    }
+}
+
+/// Starts the change feed of a PostgreSQL deployment (see [`super::feed`]).
+fn spawn_feed(state: &AppState) -> Option<tokio::task::JoinHandle<()>> {
+    match state.config.database_location() {
+        store::Location::Postgres(url) => Some(super::feed::spawn(state, url)),
+        store::Location::Sqlite(_) => None,
+    }
+}
+
+/// Waits up to the shutdown grace for the workers to re-queue their jobs, then aborts them.
+async fn drain_workers(state: &AppState, workers: &mut tokio::task::JoinSet<()>) {
+    let grace = state.config.queue.shutdown_grace;
+    let drained = tokio::time::timeout(grace, async { while workers.join_next().await.is_some() {} }).await;
+    if drained.is_err() {
+        tracing::warn!(
+            ?grace,
+            "workers did not stop in time; their jobs will be re-claimed after the lease"
+        );
+        workers.abort_all();
     }
 }
 

@@ -30,6 +30,11 @@ pub struct ServeArgs {
     /// Directory holding the database, uploaded documents, job outputs and generated secrets.
     #[arg(long, env = "EYEKEY_DATA_DIR", default_value = "./eyekey-data")]
     pub data_dir: PathBuf,
+    /// The database: `sqlite://PATH` or `postgres://USER:PASSWORD@HOST:PORT/DB` (default: the SQLite file
+    /// `eyekey.db` in the data directory). With PostgreSQL, documents and bundles are stored in the
+    /// database too, so any number of `serve` and `worker` processes on any machines share one service.
+    #[arg(long, env = "EYEKEY_DATABASE_URL", hide_env_values = true, value_parser = parse_location)]
+    pub database_url: Option<crate::service::store::Location>,
     /// Operator bearer token (default: `<data-dir>/operator-token`, generated on first start).
     #[arg(long, env = "EYEKEY_OPERATOR_TOKEN", hide_env_values = true)]
     pub operator_token: Option<String>,
@@ -81,6 +86,48 @@ pub struct ServeArgs {
     pub retention_days: u32,
 }
 
+/// Command-line flags and environment variables of `eyekey worker`: job workers with no API, on a
+/// PostgreSQL database shared with `eyekey serve` processes.
+#[derive(clap::Args, Clone)]
+pub struct WorkerArgs {
+    /// The database, `postgres://USER:PASSWORD@HOST:PORT/DB`, the same as the API processes'.
+    #[arg(long, env = "EYEKEY_DATABASE_URL", hide_env_values = true, value_parser = parse_location)]
+    pub database_url: crate::service::store::Location,
+    /// Directory for this process's lock and, unless given by `EYEKEY_MASTER_KEY`, the master key file.
+    #[arg(long, env = "EYEKEY_DATA_DIR", default_value = "./eyekey-worker")]
+    pub data_dir: PathBuf,
+    /// Master key, 64 hex digits: the one every eyekey process of this database shares (default:
+    /// `<data-dir>/master.key`).
+    #[arg(long, env = "EYEKEY_MASTER_KEY", hide_env_values = true)]
+    pub master_key: Option<String>,
+    /// Jobs solved at once by this process. Each job already spreads over every core (rayon), so 1 is
+    /// usually right; run one worker process per machine.
+    #[arg(long, env = "EYEKEY_WORKERS", default_value_t = 1)]
+    pub workers: usize,
+    /// Lease a worker holds on a running job, seconds; renewed by a heartbeat every third of it.
+    #[arg(long, env = "EYEKEY_LEASE_SECS", default_value_t = 30)]
+    pub lease_secs: u64,
+    /// On shutdown, how long running jobs get to stop and be re-queued, seconds.
+    #[arg(long, env = "EYEKEY_SHUTDOWN_GRACE_SECS", default_value_t = 20)]
+    pub shutdown_grace_secs: u64,
+    /// Memory bound of the transport-operator cache shared by this process's jobs, MiB (0 disables it).
+    #[arg(long, env = "EYEKEY_TRANSPORT_CACHE_MB", default_value_t = 512)]
+    pub transport_cache_mb: usize,
+}
+
+impl From<WorkerArgs> for Config {
+    fn from(a: WorkerArgs) -> Self {
+        let mut config = Config::new(a.data_dir);
+        config.database = Some(a.database_url);
+        config.master_key_hex = a.master_key.filter(|k| !k.is_empty());
+        config.workers = a.workers;
+        config.queue.lease = Duration::from_secs(a.lease_secs.max(1));
+        config.queue.shutdown_grace = Duration::from_secs(a.shutdown_grace_secs);
+        config.transport_cache_bytes = a.transport_cache_mb.saturating_mul(1 << 20);
+        config
+    }
+}
+
 /// Everything the service needs to start. Its `Debug` hides the secrets.
 #[derive(Clone)]
 pub struct Config {
@@ -92,6 +139,8 @@ pub struct Config {
     pub insecure_http: bool,
     /// Data directory.
     pub data_dir: PathBuf,
+    /// The database; `None` is `<data_dir>/eyekey.db` (SQLite).
+    pub database: Option<crate::service::store::Location>,
     /// Operator token; `None` reads or generates `<data_dir>/operator-token`.
     pub operator_token: Option<String>,
     /// Master key as 64 hex digits; `None` reads or generates `<data_dir>/master.key`.
@@ -173,6 +222,7 @@ impl Config {
             tls: None,
             insecure_http: false,
             data_dir: data_dir.into(),
+            database: None,
             operator_token: None,
             master_key_hex: None,
             workers: 1,
@@ -186,9 +236,16 @@ impl Config {
         }
     }
 
-    /// The path of the SQLite database.
+    /// The path of the SQLite database in the data directory (the default database).
     pub fn database_path(&self) -> PathBuf {
         self.data_dir.join("eyekey.db")
+    }
+
+    /// Where the database is.
+    pub fn database_location(&self) -> crate::service::store::Location {
+        self.database
+            .clone()
+            .unwrap_or_else(|| crate::service::store::Location::Sqlite(self.database_path()))
     }
 }
 
@@ -199,6 +256,7 @@ impl From<ServeArgs> for Config {
             tls: a.tls_cert.zip(a.tls_key),
             insecure_http: a.insecure_http,
             data_dir: a.data_dir,
+            database: a.database_url,
             operator_token: a.operator_token.filter(|t| !t.is_empty()),
             master_key_hex: a.master_key.filter(|k| !k.is_empty()),
             workers: a.workers,
@@ -224,6 +282,10 @@ impl From<ServeArgs> for Config {
             min_free_bytes: a.min_free_mb.saturating_mul(1 << 20),
         }
     }
+}
+
+fn parse_location(text: &str) -> Result<crate::service::store::Location, String> {
+    crate::service::store::Location::parse(text)
 }
 
 /// Half of the machine's memory (`MemTotal` of `/proc/meminfo`), or 4 GiB where it cannot be read.
@@ -252,6 +314,7 @@ impl std::fmt::Debug for Config {
             .field("tls", &self.tls)
             .field("insecure_http", &self.insecure_http)
             .field("data_dir", &self.data_dir)
+            .field("database", &self.database)
             .field("operator_token", &redacted(&self.operator_token))
             .field("master_key_hex", &redacted(&self.master_key_hex))
             .field("workers", &self.workers)
@@ -263,6 +326,12 @@ impl std::fmt::Debug for Config {
             .field("max_job_seconds", &self.max_job_seconds)
             .field("min_free_bytes", &self.min_free_bytes)
             .finish()
+    }
+}
+
+impl std::fmt::Debug for WorkerArgs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Debug::fmt(&Config::from(self.clone()), f)
     }
 }
 

@@ -14,6 +14,7 @@ pub mod auth;
 pub mod config;
 pub mod crypto;
 pub mod error;
+pub mod feed;
 pub mod images;
 pub mod jobs;
 pub mod listener;
@@ -24,8 +25,8 @@ pub mod sealed;
 pub mod state;
 pub mod store;
 
-pub use app::{Application, ShutdownHandle};
-pub use config::{Config, ServeArgs};
+pub use app::{Application, ShutdownHandle, WorkerProcess};
+pub use config::{Config, ServeArgs, WorkerArgs};
 pub use jobs::try_execute_next_job;
 pub use state::AppState;
 
@@ -38,4 +39,11 @@ pub async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         eprintln!("eyekey operator token: in {}", path.display());
     }
     app.run_until_stopped().await
+}
+
+/// Runs `eyekey worker` (job workers, no API) until SIGINT or SIGTERM.
+pub async fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+    let process = WorkerProcess::build(Config::from(args)).await?;
+    eprintln!("eyekey worker running ({} worker(s))", process.state().config.workers);
+    process.run_until_stopped().await
 }

@@ -22,7 +22,7 @@ const RETENTION_INTERVAL: Duration = Duration::from_secs(3600);
 /// holds), then checkpoints the database's log. Failures are logged: the keys are already gone.
 pub async fn finish_deletion(state: &AppState, paths: &[String]) {
     for relative in paths {
-        remove_relative(state.data_dir(), relative).await;
+        remove_relative(&state.objects, relative).await;
     }
     match store::checkpoint(&state.writer).await {
         Ok(true) => {}
@@ -31,22 +31,15 @@ pub async fn finish_deletion(state: &AppState, paths: &[String]) {
     }
 }
 
-/// Removes `relative` under `data_dir` (file or directory); refuses paths that leave it.
-async fn remove_relative(data_dir: &Path, relative: &str) {
+/// Removes the object or directory of objects `relative`; refuses paths that leave the data directory.
+async fn remove_relative(objects: &store::objects::Objects, relative: &str) {
     let path = Path::new(relative);
     if !path.components().all(|c| matches!(c, Component::Normal(_))) {
         tracing::error!(path = relative, "refusing to remove a path outside the data directory");
         return;
     }
-    let full = data_dir.join(path);
-    let result = match tokio::fs::symlink_metadata(&full).await {
-        Ok(m) if m.is_dir() => tokio::fs::remove_dir_all(&full).await,
-        Ok(_) => tokio::fs::remove_file(&full).await,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e),
-    };
-    if let Err(e) = result {
-        tracing::warn!(path = %full.display(), error = %e, "could not remove deleted data (its key is gone)");
+    if let Err(e) = objects.remove(relative).await {
+        tracing::warn!(path = relative, error = %e, "could not remove deleted data (its key is gone)");
     }
 }
 
@@ -103,6 +96,26 @@ pub fn spawn_retention(state: &AppState) -> tokio::task::JoinHandle<()> {
     })
 }
 
+/// At the start of an API process on PostgreSQL: removes the objects of deleted documents and jobs whose
+/// removal did not happen (the process died between the deleting commit and the removal). Objects under a
+/// queued or running job are kept: a worker elsewhere may have stored its output and not yet recorded it.
+/// Returns how many objects went.
+pub async fn sweep_objects(state: &AppState) -> anyhow::Result<u64> {
+    let r = sqlx::query(
+        "DELETE FROM objects o WHERE
+             (o.path >= 'documents/' AND o.path < 'documents0'
+              AND NOT EXISTS (SELECT 1 FROM documents d WHERE d.deleted_at IS NULL AND d.path = o.path))
+          OR (o.path >= 'jobs/' AND o.path < 'jobs0'
+              AND NOT EXISTS (SELECT 1 FROM jobs j WHERE j.deleted_at IS NULL AND (
+                      (j.bundle_path IS NOT NULL AND o.path >= j.bundle_path || '/' AND o.path < j.bundle_path || '0')
+                   OR (j.state IN ('queued', 'running') AND o.path >= 'jobs/' || j.id || '-'
+                       AND o.path < 'jobs/' || j.id || '.'))))",
+    )
+    .execute(&state.writer.0)
+    .await?;
+    Ok(r.rows_affected())
+}
+
 /// At start, before any worker runs: removes temporary files a crash left (`.part` files, `.tmp-*` job
 /// directories) and the files of deleted documents and jobs whose removal did not happen. Returns how
 /// many entries went.
@@ -132,7 +145,7 @@ pub async fn sweep(state: &AppState) -> anyhow::Result<usize> {
                 continue;
             }
             // In jobs/, a queued or running job has no directory yet but its `.tmp-` one.
-            remove_relative(data, &relative).await;
+            remove_relative(&state.objects, &relative).await;
             tracing::info!(path = %relative, "removed a leftover (temporary or deleted)");
             removed += 1;
         }
@@ -148,8 +161,7 @@ pub async fn seal_unsealed(state: &AppState) -> anyhow::Result<(usize, usize)> {
     for doc in &docs {
         let plain_path = state.data_dir().join(&doc.path);
         let bytes = tokio::fs::read(&plain_path).await?;
-        let (dir, master, id) = (state.data_dir().clone(), state.master_key.clone(), doc.id.clone());
-        let stored = tokio::task::spawn_blocking(move || sealed::store_document(&dir, &master, &id, &bytes)).await??;
+        let stored = sealed::store_document(&state.objects, &state.master_key, &doc.id, bytes.into()).await?;
         store::documents::set_sealed(
             &state.writer,
             &doc.id,

@@ -14,6 +14,7 @@ use std::path::Path;
 use super::crypto::{CryptoError, DataKey, MasterKey};
 use super::store::documents::DocumentRow;
 use super::store::jobs::JobRow;
+use super::store::objects::Objects;
 use eyekey_core::encoding::pipeline::EncodeOptions;
 
 /// Suffix of every sealed file.
@@ -64,23 +65,48 @@ pub struct StoredDocument {
     pub content_mac: String,
 }
 
-/// Seals a document's bytes under a new data key into `<data_dir>/documents/<id>.sealed` (blocking).
-pub fn store_document(data_dir: &Path, master: &MasterKey, id: &str, bytes: &[u8]) -> std::io::Result<StoredDocument> {
-    let key = DataKey::generate();
-    let data_key = key.wrap(master, &document_key_aad(id)).map_err(std::io::Error::other)?;
+/// Seals a document's bytes under a new data key and stores them as `documents/<id>.sealed`.
+pub async fn store_document(
+    objects: &Objects,
+    master: &MasterKey,
+    id: &str,
+    bytes: std::sync::Arc<[u8]>,
+) -> std::io::Result<StoredDocument> {
+    let (master, doc_id) = (master.clone(), id.to_string());
+    let (sealed, data_key, content_mac) = tokio::task::spawn_blocking(move || {
+        let key = DataKey::generate();
+        let data_key = key
+            .wrap(&master, &document_key_aad(&doc_id))
+            .map_err(std::io::Error::other)?;
+        let sealed = key
+            .seal(&bytes, &document_aad(&doc_id))
+            .map_err(std::io::Error::other)?;
+        Ok::<_, std::io::Error>((sealed, data_key, master.digest(DOCUMENT_MAC, &bytes)))
+    })
+    .await
+    .map_err(std::io::Error::other)??;
     let path = format!("documents/{id}{SUFFIX}");
-    seal_to_file(&data_dir.join(&path), &key, &document_aad(id), bytes)?;
+    objects.write(&path, sealed).await?;
     Ok(StoredDocument {
         path,
         data_key,
-        content_mac: master.digest(DOCUMENT_MAC, bytes),
+        content_mac,
     })
 }
 
-/// A document's bytes, opened from its sealed file.
-pub async fn open_document(data_dir: &Path, master: &MasterKey, doc: &DocumentRow) -> Result<Vec<u8>, OpenError> {
+/// A document's bytes, opened from its sealed object.
+pub async fn open_document(objects: &Objects, master: &MasterKey, doc: &DocumentRow) -> Result<Vec<u8>, OpenError> {
     let key = unwrap_key(master, doc.data_key.as_deref(), &document_key_aad(&doc.id)).map_err(|_| OpenError::Open)?;
-    open_file(&data_dir.join(&doc.path), &key, &document_aad(&doc.id)).await
+    open_object(objects, &doc.path, &key, &document_aad(&doc.id)).await
+}
+
+/// Reads and opens a sealed object.
+pub async fn open_object(objects: &Objects, name: &str, key: &DataKey, aad: &[u8]) -> Result<Vec<u8>, OpenError> {
+    match objects.read(name).await {
+        Ok(Some(sealed)) => key.open(&sealed, aad).map_err(|_| OpenError::Open),
+        Ok(None) => Err(OpenError::Missing),
+        Err(e) => Err(OpenError::Io(e)),
+    }
 }
 
 /// Writes `bytes` (already sealed) to `path`: into `.<name>.part` beside it, fsynced, then renamed, and the

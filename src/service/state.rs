@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 use tokio::sync::{broadcast, watch, Notify};
 
 use super::config::Config;
@@ -44,9 +44,11 @@ pub struct AppState(pub Arc<Inner>);
 /// The contents of [`AppState`].
 pub struct Inner {
     /// The database, for reads.
-    pub db: SqlitePool,
+    pub db: AnyPool,
     /// The database's single writing connection (see [`Writer`]).
     pub writer: Writer,
+    /// Where sealed documents and job outputs lie (the data directory, or the database).
+    pub objects: super::store::objects::Objects,
     /// Configuration, secrets resolved.
     pub config: Config,
     /// Key sealing profiles.
@@ -82,8 +84,12 @@ impl AppState {
         &self.config.data_dir
     }
 
-    /// Broadcasts a job change (no receivers is fine).
+    /// Broadcasts a job change (no receivers is fine). With PostgreSQL the change feed
+    /// ([`super::feed`]) announces every change, from whichever process made it, so this does nothing.
     pub fn publish(&self, row: &JobRow) {
+        if self.writer.backend() == super::store::Backend::Postgres {
+            return;
+        }
         let _ = self.events.send(JobEvent::of(row));
     }
 

@@ -61,7 +61,7 @@ async fn a_ciphertext_moved_to_another_profile_does_not_open() {
     // Swap a's sealed profile into b's row: the associated data (id, version) no longer matches.
     sqlx::query(
         "UPDATE profile_versions SET (nonce, ciphertext) =
-             (SELECT nonce, ciphertext FROM profile_versions WHERE profile_id = ?1) WHERE profile_id = ?2",
+             (SELECT nonce, ciphertext FROM profile_versions WHERE profile_id = $1) WHERE profile_id = $2",
     )
     .bind(&a)
     .bind(&b)

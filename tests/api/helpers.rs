@@ -273,8 +273,6 @@ impl TestApp {
         .unwrap()
         .expect("a queued job");
         let relative = format!("jobs/{}-{}", job.id, job.attempts);
-        let dir = self.data_dir.join(&relative);
-        std::fs::create_dir_all(&dir).unwrap();
         let mut outputs: Vec<(String, Vec<u8>)> = ["frame_0.png", "frame_1.png", "barrier_mask.png"]
             .iter()
             .map(|n| (n.to_string(), document_png(4, 4)))
@@ -287,7 +285,8 @@ impl TestApp {
         outputs.push(("views/target.png".into(), document_png(4, 4)));
         let id = job.id.to_string();
         let key = eyekey::service::sealed::job_key(&self.state.master_key, &job).unwrap();
-        let files = eyekey::service::jobs::seal_outputs(&dir, &key, &id, &outputs).unwrap();
+        let (files, sealed) = eyekey::service::jobs::seal_outputs(&key, &id, &outputs).unwrap();
+        self.state.objects.write_dir(&relative, sealed).await.unwrap();
         let ok = store::jobs::mark_succeeded(
             &self.state.writer,
             job.id,

@@ -313,7 +313,7 @@ async fn a_deleted_profile_takes_its_queued_jobs_with_it() {
     app.op_delete(&format!("/v1/profiles/{}", f.profile_id)).await;
     let r = app.op_get(&format!("/v1/jobs/{id}")).await;
     assert_eq!(r.status(), StatusCode::NOT_FOUND);
-    let (state, error): (String, String) = sqlx::query_as("SELECT state, last_error FROM jobs WHERE id = ?")
+    let (state, error): (String, String) = sqlx::query_as("SELECT state, last_error FROM jobs WHERE id = $1")
         .bind(&id)
         .fetch_one(&app.state.db)
         .await

@@ -59,7 +59,7 @@ async fn a_profile_can_be_enrolled_read_listed_reenrolled_and_deleted() {
     .await;
     let list = expect_json(app.op_get("/v1/profiles").await, StatusCode::OK).await;
     assert!(list["items"].as_array().unwrap().is_empty());
-    let versions: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM profile_versions WHERE profile_id = ?")
+    let versions: (i64,) = sqlx::query_as("SELECT COUNT(*) FROM profile_versions WHERE profile_id = $1")
         .bind(&id)
         .fetch_one(&app.state.db)
         .await

@@ -143,7 +143,7 @@ async fn a_job_whose_inputs_vanish_after_it_was_claimed_ends_without_retrying() 
         .await
         .unwrap();
     let (state, attempts, error): (String, i64, Option<String>) =
-        sqlx::query_as("SELECT state, attempts, last_error FROM jobs WHERE id = ?")
+        sqlx::query_as("SELECT state, attempts, last_error FROM jobs WHERE id = $1")
             .bind(&id)
             .fetch_one(&app.state.db)
             .await

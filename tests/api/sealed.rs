@@ -186,12 +186,12 @@ async fn neither_the_manifest_nor_the_database_holds_the_document_text_or_a_hash
 
 /// The wrapped data keys of a job and a document, as stored.
 async fn keys_of(app: &TestApp, job: &str, document: &str) -> (Vec<u8>, Vec<u8>) {
-    let (job_key,): (Vec<u8>,) = sqlx::query_as("SELECT data_key FROM jobs WHERE id = ?")
+    let (job_key,): (Vec<u8>,) = sqlx::query_as("SELECT data_key FROM jobs WHERE id = $1")
         .bind(job)
         .fetch_one(&app.state.db)
         .await
         .unwrap();
-    let (doc_key,): (Vec<u8>,) = sqlx::query_as("SELECT data_key FROM documents WHERE id = ?")
+    let (doc_key,): (Vec<u8>,) = sqlx::query_as("SELECT data_key FROM documents WHERE id = $1")
         .bind(document)
         .fetch_one(&app.state.db)
         .await
@@ -263,7 +263,7 @@ async fn deleting_a_profile_leaves_no_copy_of_its_ciphertext_and_deletes_the_job
     body["observer_profile_ids"] = json!([observer]);
     expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
     let id = app.complete_with_fake_bundle().await;
-    let (ciphertext,): (Vec<u8>,) = sqlx::query_as("SELECT ciphertext FROM profile_versions WHERE profile_id = ?")
+    let (ciphertext,): (Vec<u8>,) = sqlx::query_as("SELECT ciphertext FROM profile_versions WHERE profile_id = $1")
         .bind(&observer)
         .fetch_one(&app.state.db)
         .await
@@ -340,7 +340,7 @@ async fn a_job_deleted_while_it_runs_stops_and_leaves_no_output() {
     );
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
     loop {
-        let (state,): (String,) = sqlx::query_as("SELECT state FROM jobs WHERE id = ?")
+        let (state,): (String,) = sqlx::query_as("SELECT state FROM jobs WHERE id = $1")
             .bind(&id)
             .fetch_one(&app.state.db)
             .await
@@ -453,13 +453,13 @@ async fn data_stored_in_clear_by_an_older_version_is_sealed_at_start_and_still_w
         std::fs::remove_file(&path).unwrap();
     }
     let options = eyekey::service::sealed::job_options(&app.state.master_key, &job).unwrap();
-    sqlx::query("UPDATE documents SET data_key = NULL, path = ? WHERE id = ?")
+    sqlx::query("UPDATE documents SET data_key = NULL, path = $1 WHERE id = $2")
         .bind(&doc_path)
         .bind(&f.document_id)
         .execute(&app.state.writer.0)
         .await
         .unwrap();
-    sqlx::query("UPDATE jobs SET data_key = NULL, sealed_options = NULL, options = ?, bundle_path = ? WHERE id = ?")
+    sqlx::query("UPDATE jobs SET data_key = NULL, sealed_options = NULL, options = $1, bundle_path = $2 WHERE id = $3")
         .bind(serde_json::to_string(&options).unwrap())
         .bind(format!("jobs/{id}"))
         .bind(&id)
@@ -537,7 +537,7 @@ async fn a_job_options_hint_is_sealed_and_a_request_digest_is_keyed() {
     body["options"]["document_text"] = json!({"lines": ["PIN", "4821"], "scale": 4, "alphabet": "0123456789"});
     let job = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
     let (options, sealed, hash): (String, Vec<u8>, String) =
-        sqlx::query_as("SELECT options, sealed_options, request_hash FROM jobs WHERE id = ?")
+        sqlx::query_as("SELECT options, sealed_options, request_hash FROM jobs WHERE id = $1")
             .bind(job["id"].as_str().unwrap())
             .fetch_one(&app.state.db)
             .await

@@ -5,9 +5,9 @@
 //! rayon pool; tokio's worker threads never solve). Meanwhile the async side renews the lease (every third of
 //! it, and at least every 500 ms), writes progress, and forwards a cancel request to the solver's flag.
 //! The outputs exist in clear only in memory: each file, and the bundle's zip, is sealed under the job's data
-//! key into `<data>/jobs/.tmp-<job>-<attempt>/<name>.sealed`, and the directory is renamed to
-//! `<data>/jobs/<job>-<attempt>/` only when complete, so a bundle is never visible half-written. A worker
-//! whose success is refused (it lost the job, or the job was deleted meanwhile) removes its own output.
+//! key and stored as the objects `jobs/<job>-<attempt>/<name>.sealed` all at once (a directory renamed into
+//! place on disk, one transaction in PostgreSQL), so a bundle is never visible half-written. A worker whose
+//! success is refused (it lost the job, or the job was deleted meanwhile) removes its own output.
 //!
 //! Outcomes: success → `succeeded`; `PipelineError::Invalid` → `failed` at once (retrying cannot help);
 //! any other error or a panic → back to `queued` while attempts remain, else `failed`; a cancel request →
@@ -15,7 +15,6 @@
 
 pub mod bundle;
 
-use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -158,10 +157,12 @@ enum Stop {
     LostLease,
 }
 
-/// What the solver thread hands back: the evaluation report and the sealed bundle's files.
+/// What the solver thread hands back: the evaluation report, the bundle's file list and every output
+/// sealed (name relative to the output directory, sealed bytes).
 struct Solved {
     evaluation: serde_json::Value,
     files: Vec<bundle::BundleFile>,
+    sealed: Vec<(String, Vec<u8>)>,
 }
 
 /// A running solver and the flags it shares with the async side.
@@ -201,43 +202,31 @@ pub async fn execute_claimed(state: &AppState, job: JobRow) -> anyhow::Result<()
         Some(true) => return end(state, &job, JobState::Cancelled, None).await,
         Some(false) => {}
     }
-    let tmp = prepare_temp_dir(state, &job).await?;
-    let solver = spawn_solver(state, spec, key.clone(), &tmp, job.id.to_string());
+    let solver = spawn_solver(state, spec, key.clone(), job.id.to_string());
     let finished = supervise(state, &job, solver).await;
-    finalise(state, &job, &key, tmp, finished).await
+    finalise(state, &job, &key, finished).await
 }
 
-/// Creates this attempt's empty output directory, `<data>/jobs/.tmp-<job>-<attempt>/` (clearing one a
-/// crashed run of the same attempt left behind).
-async fn prepare_temp_dir(state: &AppState, job: &JobRow) -> anyhow::Result<PathBuf> {
-    let tmp = state
-        .data_dir()
-        .join("jobs")
-        .join(format!(".tmp-{}-{}", job.id, job.attempts));
-    if tokio::fs::try_exists(&tmp).await.unwrap_or(false) {
-        tokio::fs::remove_dir_all(&tmp).await?;
-    }
-    tokio::fs::create_dir_all(&tmp).await?;
-    Ok(tmp)
-}
-
-/// Starts the pipeline on a blocking thread; its outputs and the bundle's zip are sealed under `key` into
-/// `tmp`.
-fn spawn_solver(state: &AppState, spec: JobSpec, key: DataKey, tmp: &Path, job_id: String) -> Solver {
+/// Starts the pipeline on a blocking thread; its outputs and the bundle's zip are sealed under `key`.
+fn spawn_solver(state: &AppState, spec: JobSpec, key: DataKey, job_id: String) -> Solver {
     let cancel = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(AtomicU64::new(0f64.to_bits()));
     let started = Instant::now();
     let handle = tokio::task::spawn_blocking({
-        let (cancel, progress, tmp) = (cancel.clone(), progress.clone(), tmp.to_path_buf());
+        let (cancel, progress) = (cancel.clone(), progress.clone());
         let cache = state.transport_cache.clone();
         move || -> Result<Solved, PipelineError> {
             let report = |p: f64| progress.store(p.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
             let rendered = render_job(&spec, &cache, &report, &cancel)?;
-            let files = seal_outputs(&tmp, &key, &job_id, &rendered.files)
-                .map_err(|e| PipelineError::internal("storing the outputs", e))?;
+            let (files, sealed) = seal_outputs(&key, &job_id, &rendered.files)
+                .map_err(|e| PipelineError::internal("sealing the outputs", e))?;
             let evaluation = serde_json::to_value(&rendered.evaluation)
                 .map_err(|e| PipelineError::internal("recording the evaluation", e))?;
-            Ok(Solved { evaluation, files })
+            Ok(Solved {
+                evaluation,
+                files,
+                sealed,
+            })
         }
     });
     Solver {
@@ -248,27 +237,30 @@ fn spawn_solver(state: &AppState, spec: JobSpec, key: DataKey, tmp: &Path, job_i
     }
 }
 
-/// Seals a job's outputs (relative path, bytes) and the zip of its bundle under `key` into `dir`, each as
-/// `<name>.sealed`; returns the bundle's file list.
+/// The sealed objects of a job's output directory: each output (relative path, bytes) and the zip of its
+/// bundle sealed under `key`, as `(<name>.sealed, sealed bytes)`.
+pub type SealedOutputs = Vec<(String, Vec<u8>)>;
+
+/// Seals a job's outputs (relative path, bytes) and the zip of its bundle under `key`; returns the bundle's
+/// file list and the sealed objects to store under the job's output directory.
 pub fn seal_outputs(
-    dir: &Path,
     key: &DataKey,
     job_id: &str,
     outputs: &[(String, Vec<u8>)],
-) -> std::io::Result<Vec<bundle::BundleFile>> {
+) -> std::io::Result<(Vec<bundle::BundleFile>, SealedOutputs)> {
     let (files, zipped) = bundle::zip_bundle(outputs)?;
     let outputs = outputs.iter().map(|(n, b)| (n.as_str(), b.as_slice()));
+    let mut sealed_files = Vec::new();
     for (name, plain) in outputs.chain([(bundle::ZIP_NAME, zipped.as_slice())]) {
         if !name.split('/').all(bundle::is_plain_file_name) {
             return Err(std::io::Error::other(format!("not a plain output name: {name}")));
         }
-        let path = dir.join(format!("{name}{}", sealed::SUFFIX));
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent)?;
-        }
-        sealed::seal_to_file(&path, key, &sealed::job_file_aad(job_id, name), plain)?;
+        let bytes = key
+            .seal(plain, &sealed::job_file_aad(job_id, name))
+            .map_err(std::io::Error::other)?;
+        sealed_files.push((format!("{name}{}", sealed::SUFFIX), bytes));
     }
-    Ok(files)
+    Ok((files, sealed_files))
 }
 
 /// Waits for the solver while renewing the lease and recording progress, and asks it to stop on a
@@ -371,22 +363,13 @@ impl Outcome {
     }
 }
 
-/// Records how the attempt ended. Every outcome but success discards the temporary output first.
-async fn finalise(
-    state: &AppState,
-    job: &JobRow,
-    key: &DataKey,
-    tmp: PathBuf,
-    finished: Finished,
-) -> anyhow::Result<()> {
+/// Records how the attempt ended.
+async fn finalise(state: &AppState, job: &JobRow, key: &DataKey, finished: Finished) -> anyhow::Result<()> {
     let outcome = Outcome::of(finished.outcome, finished.stop);
-    if !matches!(outcome, Outcome::Succeeded(_)) {
-        discard(&tmp).await;
-    }
     let elapsed = finished.elapsed;
     match outcome {
         Outcome::Abandoned => Ok(()),
-        Outcome::Succeeded(solved) => finalise_success(state, job, key, &tmp, solved, elapsed).await,
+        Outcome::Succeeded(solved) => finalise_success(state, job, key, solved, elapsed).await,
         Outcome::Interrupted => requeue_on_shutdown(state, job).await,
         Outcome::Cancelled => finalise_cancelled(state, job, elapsed).await,
         Outcome::Invalid(e) => end(state, job, JobState::Failed, Some(&e.to_string())).await,
@@ -395,35 +378,30 @@ async fn finalise(
     }
 }
 
-/// Removes an attempt's temporary output (a failure is only logged).
-async fn discard(dir: &Path) {
-    if let Err(e) = tokio::fs::remove_dir_all(dir).await {
-        tracing::warn!(dir = %dir.display(), error = %e, "could not remove a job's temporary output");
+/// Removes an attempt's output (a failure is only logged).
+async fn discard(state: &AppState, dir: &str) {
+    if let Err(e) = state.objects.remove(dir).await {
+        tracing::warn!(dir, error = %e, "could not remove a job's output");
     }
 }
 
-/// Moves the output into `<data>/jobs/<job>-<attempt>/` and records the success, fenced by the attempt: a
-/// worker that lost the job meanwhile, or whose job was deleted, removes its output and records nothing.
+/// Stores the output as `jobs/<job>-<attempt>/` (replacing what a crashed run of this same attempt left
+/// there) and records the success, fenced by the attempt: a worker that lost the job meanwhile, or whose
+/// job was deleted, removes its output and records nothing.
 async fn finalise_success(
     state: &AppState,
     job: &JobRow,
     key: &DataKey,
-    tmp: &Path,
     solved: Solved,
     elapsed: Duration,
 ) -> anyhow::Result<()> {
     let relative = format!("jobs/{}-{}", job.id, job.attempts);
-    let final_dir = state.data_dir().join(&relative);
-    if tokio::fs::try_exists(&final_dir).await.unwrap_or(false) {
-        // Left by this same attempt in a run that renamed its output but died before recording it.
-        tokio::fs::remove_dir_all(&final_dir).await?;
-    }
-    tokio::fs::rename(tmp, &final_dir).await?;
+    state.objects.write_dir(&relative, solved.sealed).await?;
     let success = store::jobs::Success {
         sealed_summary: summarise(&solved.evaluation)
             .map(|text| key.seal(text.as_bytes(), &sealed::job_summary_aad(&job.id.to_string())))
             .transpose()?,
-        bundle_path: relative,
+        bundle_path: relative.clone(),
         bundle_files: serde_json::to_string(&solved.files)?,
         solve_ms: elapsed.as_millis() as i64,
     };
@@ -434,7 +412,7 @@ async fn finalise_success(
         publish_current(state, job.id).await;
     } else {
         tracing::warn!(job = %job.id, attempt = job.attempts, "finished after losing the job, or after it was deleted; result dropped");
-        discard(&final_dir).await;
+        discard(state, &relative).await;
         // A deleted job that was running ends as cancelled (it stays a tombstone).
         end(state, job, JobState::Cancelled, None).await?;
     }
@@ -540,7 +518,7 @@ async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::Rgb
     let doc = store::documents::get(&state.db, id)
         .await?
         .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} was deleted")))?;
-    let bytes = sealed::open_document(state.data_dir(), &state.master_key, &doc)
+    let bytes = sealed::open_document(&state.objects, &state.master_key, &doc)
         .await
         .map_err(|e| match e {
             sealed::OpenError::Io(e) => LoadError::Transient(anyhow::anyhow!("reading the {role} document: {e}")),

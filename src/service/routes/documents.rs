@@ -321,10 +321,8 @@ async fn store_new(
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
     let id = id_text(&Uuid::new_v4());
     let len = bytes.len() as i64;
-    let (dir, master, doc_id) = (state.data_dir().clone(), state.master_key.clone(), id.clone());
-    let stored = tokio::task::spawn_blocking(move || sealed::store_document(&dir, &master, &doc_id, &bytes))
+    let stored = sealed::store_document(&state.objects, &state.master_key, &id, bytes.to_vec().into())
         .await
-        .map_err(internal)?
         .map_err(ApiError::from_io)?;
     let row = store::documents::insert(
         &state.writer,
@@ -386,7 +384,7 @@ pub async fn get_document_image(
     let row = store::documents::get(&state.db, &id_text(&id))
         .await?
         .ok_or(ApiError::NotFound("document"))?;
-    let bytes = match sealed::open_document(state.data_dir(), &state.master_key, &row).await {
+    let bytes = match sealed::open_document(&state.objects, &state.master_key, &row).await {
         Ok(bytes) => bytes,
         Err(sealed::OpenError::Missing) => return Err(ApiError::NotFound("document")),
         Err(sealed::OpenError::Io(e)) => return Err(ApiError::from_io(e)),

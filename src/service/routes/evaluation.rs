@@ -93,22 +93,16 @@ pub async fn list_views(
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Json<ViewList>, ApiError> {
     let job = succeeded(&state, &id).await?;
-    let dir = state
-        .data_dir()
-        .join(job.bundle_path.as_deref().unwrap_or_default())
-        .join("views");
-    let mut names = Vec::new();
-    if let Ok(mut entries) = tokio::fs::read_dir(&dir).await {
-        while let Ok(Some(e)) = entries.next_entry().await {
-            if let Ok(name) = e.file_name().into_string() {
-                if let Some(name) = name.strip_suffix(sealed::SUFFIX) {
-                    if name.ends_with(".png") && is_plain_file_name(name) {
-                        names.push(name.to_string());
-                    }
-                }
-            }
-        }
-    }
+    let dir = format!("{}/views", job.bundle_path.as_deref().unwrap_or_default());
+    let mut names: Vec<String> = state
+        .objects
+        .list(&dir)
+        .await
+        .map_err(ApiError::from_io)?
+        .into_iter()
+        .filter_map(|name| name.strip_suffix(sealed::SUFFIX).map(str::to_string))
+        .filter(|name| name.ends_with(".png") && is_plain_file_name(name))
+        .collect();
     names.sort();
     Ok(Json(ViewList { names }))
 }

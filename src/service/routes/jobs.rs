@@ -359,7 +359,7 @@ fn admit(
 /// Checks that every input of a job creation exists; returns the display's geometry, the target profile
 /// and the observers pinned to their current versions.
 async fn resolve_inputs(
-    db: &sqlx::SqlitePool,
+    db: &sqlx::AnyPool,
     body: &CreateJob,
 ) -> Result<(DisplayGeometry, store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
     let display = store::displays::get(db, &id_text(&body.display_id))

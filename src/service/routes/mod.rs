@@ -151,12 +151,12 @@ pub async fn send_sealed(
     };
     let id = job.id.to_string();
     let key = sealed::job_key(&state.master_key, job).map_err(|_| ApiError::NotFound(what))?;
-    let path = state.data_dir().join(dir).join(format!("{name}{}", sealed::SUFFIX));
-    let plain = match sealed::open_file(&path, &key, &sealed::job_file_aad(&id, name)).await {
+    let path = format!("{dir}/{name}{}", sealed::SUFFIX);
+    let plain = match sealed::open_object(&state.objects, &path, &key, &sealed::job_file_aad(&id, name)).await {
         Ok(p) => p,
         Err(sealed::OpenError::Missing) => return Err(ApiError::NotFound(what)),
         Err(sealed::OpenError::Io(e)) => return Err(ApiError::from_io(e)),
-        Err(e @ sealed::OpenError::Open) => return Err(ApiError::Internal(anyhow::anyhow!("{}: {e}", path.display()))),
+        Err(e @ sealed::OpenError::Open) => return Err(ApiError::Internal(anyhow::anyhow!("{path}: {e}"))),
     };
     let len = plain.len();
     let mut response = Response::new(Body::from(plain));

@@ -1,6 +1,6 @@
 //! The append-only audit log.
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 
 use super::{now_ms, Cursor, Writer};
 
@@ -22,7 +22,7 @@ pub struct AuditRow {
 /// Appends an entry.
 pub async fn record(writer: &Writer, actor: &str, action: &str, resource: &str) -> Result<(), sqlx::Error> {
     let pool = &writer.0;
-    sqlx::query("INSERT INTO audit_log (actor, action, resource, created_at) VALUES (?, ?, ?, ?)")
+    sqlx::query("INSERT INTO audit_log (actor, action, resource, created_at) VALUES ($1, $2, $3, $4)")
         .bind(actor)
         .bind(action)
         .bind(resource)
@@ -35,7 +35,7 @@ pub async fn record(writer: &Writer, actor: &str, action: &str, resource: &str) 
 /// Entries newest first, after `cursor` (whose `id` is the sequence number); with `resource`, only those about
 /// it or about what lies under it (`resource/…`).
 pub async fn list(
-    pool: &SqlitePool,
+    pool: &AnyPool,
     limit: u32,
     cursor: Option<&Cursor>,
     resource: Option<&str>,
@@ -43,7 +43,7 @@ pub async fn list(
     let before = cursor.and_then(|c| c.id.parse::<i64>().ok()).unwrap_or(i64::MAX);
     match resource {
         None => sqlx::query_as::<_, AuditRow>(
-            "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < ? ORDER BY id DESC LIMIT ?",
+            "SELECT id, actor, action, resource, created_at FROM audit_log WHERE id < $1 ORDER BY id DESC LIMIT $2",
         )
         .bind(before)
         .bind(limit as i64),
@@ -51,7 +51,7 @@ pub async fn list(
         // that needs no LIKE escaping.
         Some(r) => sqlx::query_as::<_, AuditRow>(
             "SELECT id, actor, action, resource, created_at FROM audit_log \
-             WHERE id < ? AND (resource = ? OR (resource >= ? AND resource < ?)) ORDER BY id DESC LIMIT ?",
+             WHERE id < $1 AND (resource = $2 OR (resource >= $3 AND resource < $4)) ORDER BY id DESC LIMIT $5",
         )
         .bind(before)
         .bind(r)

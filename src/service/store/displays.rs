@@ -1,6 +1,6 @@
 //! Registered displays.
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 
 use super::{now_ms, Cursor, Writer};
 
@@ -37,7 +37,7 @@ pub async fn insert(
     let now = now_ms();
     sqlx::query_as::<_, DisplayRow>(&format!(
         "INSERT INTO displays (id, name, geometry, token_hash, token_rotated_at, created_at)
-         VALUES (?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+         VALUES ($1, $2, $3, $4, $5, $6) RETURNING {COLUMNS}"
     ))
     .bind(id)
     .bind(name)
@@ -50,9 +50,9 @@ pub async fn insert(
 }
 
 /// A live display.
-pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DisplayRow>, sqlx::Error> {
+pub async fn get(pool: &AnyPool, id: &str) -> Result<Option<DisplayRow>, sqlx::Error> {
     sqlx::query_as::<_, DisplayRow>(&format!(
-        "SELECT {COLUMNS} FROM displays WHERE id = ? AND deleted_at IS NULL"
+        "SELECT {COLUMNS} FROM displays WHERE id = $1 AND deleted_at IS NULL"
     ))
     .bind(id)
     .fetch_optional(pool)
@@ -60,17 +60,17 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DisplayRow>, sqlx
 }
 
 /// The `DisplayGeometry` JSON of a display, live or deleted (jobs keep referring to deleted ones).
-pub async fn geometry(pool: &SqlitePool, id: &str) -> Result<Option<String>, sqlx::Error> {
-    sqlx::query_scalar::<_, String>("SELECT geometry FROM displays WHERE id = ?")
+pub async fn geometry(pool: &AnyPool, id: &str) -> Result<Option<String>, sqlx::Error> {
+    sqlx::query_scalar::<_, String>("SELECT geometry FROM displays WHERE id = $1")
         .bind(id)
         .fetch_optional(pool)
         .await
 }
 
 /// The live display whose token has this hash (the hash column is unique and indexed).
-pub async fn by_token_hash(pool: &SqlitePool, hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
+pub async fn by_token_hash(pool: &AnyPool, hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
     sqlx::query_as::<_, DisplayRow>(&format!(
-        "SELECT {COLUMNS} FROM displays WHERE token_hash = ? AND deleted_at IS NULL"
+        "SELECT {COLUMNS} FROM displays WHERE token_hash = $1 AND deleted_at IS NULL"
     ))
     .bind(hash)
     .fetch_optional(pool)
@@ -78,7 +78,7 @@ pub async fn by_token_hash(pool: &SqlitePool, hash: &[u8]) -> Result<Option<Disp
 }
 
 /// Live displays, newest first.
-pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DisplayRow>, sqlx::Error> {
+pub async fn list(pool: &AnyPool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DisplayRow>, sqlx::Error> {
     super::list_page(pool, "displays", COLUMNS, true, limit, cursor).await
 }
 
@@ -86,7 +86,7 @@ pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Res
 pub async fn rotate_token(writer: &Writer, id: &str, token_hash: &[u8]) -> Result<Option<DisplayRow>, sqlx::Error> {
     let pool = &writer.0;
     sqlx::query_as::<_, DisplayRow>(&format!(
-        "UPDATE displays SET token_hash = ?, token_rotated_at = ? WHERE id = ? AND deleted_at IS NULL
+        "UPDATE displays SET token_hash = $1, token_rotated_at = $2 WHERE id = $3 AND deleted_at IS NULL
          RETURNING {COLUMNS}"
     ))
     .bind(token_hash)
@@ -102,7 +102,7 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
     let mut tx = pool.begin().await?;
-    let done = sqlx::query("UPDATE displays SET deleted_at = ? WHERE id = ? AND deleted_at IS NULL")
+    let done = sqlx::query("UPDATE displays SET deleted_at = $1 WHERE id = $2 AND deleted_at IS NULL")
         .bind(now)
         .bind(id)
         .execute(&mut *tx)

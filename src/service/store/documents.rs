@@ -1,6 +1,6 @@
 //! Uploaded documents: metadata and wrapped data keys (the sealed bytes are files under the data directory).
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 
 use super::{now_ms, Cursor, Writer};
 
@@ -56,7 +56,7 @@ pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow,
     let pool = &writer.0;
     sqlx::query_as::<_, DocumentRow>(&format!(
         "INSERT INTO documents (id, content_mac, content_type, bytes, width, height, path, data_key, created_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING {COLUMNS}"
     ))
     .bind(d.id)
     .bind(d.content_mac)
@@ -72,9 +72,9 @@ pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow,
 }
 
 /// One live (not deleted) document.
-pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DocumentRow>, sqlx::Error> {
+pub async fn get(pool: &AnyPool, id: &str) -> Result<Option<DocumentRow>, sqlx::Error> {
     sqlx::query_as::<_, DocumentRow>(&format!(
-        "SELECT {COLUMNS} FROM documents WHERE id = ? AND deleted_at IS NULL"
+        "SELECT {COLUMNS} FROM documents WHERE id = $1 AND deleted_at IS NULL"
     ))
     .bind(id)
     .fetch_optional(pool)
@@ -82,12 +82,12 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<DocumentRow>, sql
 }
 
 /// Live documents, newest first.
-pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DocumentRow>, sqlx::Error> {
+pub async fn list(pool: &AnyPool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<DocumentRow>, sqlx::Error> {
     super::list_page(pool, "documents", COLUMNS, true, limit, cursor).await
 }
 
 /// Live documents stored before sealing (no data key yet).
-pub async fn unsealed(pool: &SqlitePool) -> Result<Vec<DocumentRow>, sqlx::Error> {
+pub async fn unsealed(pool: &AnyPool) -> Result<Vec<DocumentRow>, sqlx::Error> {
     sqlx::query_as::<_, DocumentRow>(&format!(
         "SELECT {COLUMNS} FROM documents WHERE data_key IS NULL AND deleted_at IS NULL"
     ))
@@ -103,7 +103,7 @@ pub async fn set_sealed(
     content_mac: &str,
     data_key: &[u8],
 ) -> Result<(), sqlx::Error> {
-    sqlx::query("UPDATE documents SET path = ?, content_mac = ?, data_key = ? WHERE id = ? AND deleted_at IS NULL")
+    sqlx::query("UPDATE documents SET path = $1, content_mac = $2, data_key = $3 WHERE id = $4 AND deleted_at IS NULL")
         .bind(path)
         .bind(content_mac)
         .bind(data_key)
@@ -136,7 +136,7 @@ pub async fn delete(writer: &Writer, which: Which<'_>, now: i64) -> Result<Optio
     };
     // A NULL on either side makes its comparison false, so exactly one of the two selects.
     let doomed: Vec<(String, String)> =
-        sqlx::query_as("SELECT id, path FROM documents WHERE deleted_at IS NULL AND (id = ?1 OR created_at < ?2)")
+        sqlx::query_as("SELECT id, path FROM documents WHERE deleted_at IS NULL AND (id = $1 OR created_at < $2)")
             .bind(id)
             .bind(before)
             .fetch_all(&mut *tx)
@@ -146,7 +146,7 @@ pub async fn delete(writer: &Writer, which: Which<'_>, now: i64) -> Result<Optio
     }
     let mut left = Leftovers::default();
     for (id, path) in doomed {
-        sqlx::query("UPDATE documents SET deleted_at = ?, data_key = NULL WHERE id = ?")
+        sqlx::query("UPDATE documents SET deleted_at = $1, data_key = NULL WHERE id = $2")
             .bind(now)
             .bind(&id)
             .execute(&mut *tx)

@@ -1,18 +1,17 @@
 //! Typed resource ids.
 //!
-//! Ids are UUIDs, stored in SQLite as TEXT in the hyphenated lower-case form (`Uuid::to_string`), as the
-//! schema says. sqlx's own `Uuid` encodes to SQLite as a 16-byte BLOB, which would not match the stored
-//! values, so these types implement sqlx's `Type`, `Encode` and `Decode` for SQLite by hand, as that text.
-//! In JSON they are the same hyphenated string (`#[serde(transparent)]`).
+//! Ids are UUIDs, stored as TEXT in the hyphenated lower-case form (`Uuid::to_string`), as the schema
+//! says, on SQLite and PostgreSQL alike. The store speaks to both through sqlx's `Any` driver, which knows
+//! no UUID type, so these types implement sqlx's `Type`, `Encode` and `Decode` for `Any` by hand, as that
+//! text. In JSON they are the same hyphenated string (`#[serde(transparent)]`).
 
-use std::borrow::Cow;
 use std::fmt;
 use std::str::FromStr;
 
+use sqlx::any::{AnyTypeInfo, AnyValueRef};
 use sqlx::encode::IsNull;
 use sqlx::error::BoxDynError;
-use sqlx::sqlite::{SqliteArgumentValue, SqliteTypeInfo, SqliteValueRef};
-use sqlx::Sqlite;
+use sqlx::{Any, Database};
 use uuid::Uuid;
 
 /// Defines a `Uuid` newtype stored as hyphenated TEXT.
@@ -61,27 +60,26 @@ macro_rules! text_uuid_id {
             }
         }
 
-        impl sqlx::Type<Sqlite> for $name {
-            fn type_info() -> SqliteTypeInfo {
-                <String as sqlx::Type<Sqlite>>::type_info()
+        impl sqlx::Type<Any> for $name {
+            fn type_info() -> AnyTypeInfo {
+                <String as sqlx::Type<Any>>::type_info()
             }
 
-            fn compatible(ty: &SqliteTypeInfo) -> bool {
-                <String as sqlx::Type<Sqlite>>::compatible(ty)
-            }
-        }
-
-        impl<'q> sqlx::Encode<'q, Sqlite> for $name {
-            fn encode_by_ref(&self, args: &mut Vec<SqliteArgumentValue<'q>>) -> Result<IsNull, BoxDynError> {
-                args.push(SqliteArgumentValue::Text(Cow::Owned(self.to_string())));
-                Ok(IsNull::No)
+            fn compatible(ty: &AnyTypeInfo) -> bool {
+                <String as sqlx::Type<Any>>::compatible(ty)
             }
         }
 
-        impl<'r> sqlx::Decode<'r, Sqlite> for $name {
-            fn decode(value: SqliteValueRef<'r>) -> Result<Self, BoxDynError> {
-                let text = <&str as sqlx::Decode<Sqlite>>::decode(value)?;
-                Ok(Self(Uuid::parse_str(text)?))
+        impl<'q> sqlx::Encode<'q, Any> for $name {
+            fn encode_by_ref(&self, buf: &mut <Any as Database>::ArgumentBuffer<'q>) -> Result<IsNull, BoxDynError> {
+                <String as sqlx::Encode<'q, Any>>::encode(self.to_string(), buf)
+            }
+        }
+
+        impl<'r> sqlx::Decode<'r, Any> for $name {
+            fn decode(value: AnyValueRef<'r>) -> Result<Self, BoxDynError> {
+                let text = <String as sqlx::Decode<'r, Any>>::decode(value)?;
+                Ok(Self(Uuid::parse_str(&text)?))
             }
         }
     };
@@ -98,15 +96,16 @@ mod tests {
 
     #[tokio::test]
     async fn a_job_id_is_stored_and_read_back_as_hyphenated_text() {
-        let pool = sqlx::SqlitePool::connect("sqlite::memory:").await.unwrap();
+        sqlx::any::install_default_drivers();
+        let pool = sqlx::AnyPool::connect("sqlite::memory:").await.unwrap();
         let id = JobId::new_v4();
-        let (text, kind): (String, String) = sqlx::query_as("SELECT ?1, typeof(?1)")
+        let (text, kind): (String, String) = sqlx::query_as("SELECT $1, typeof($1)")
             .bind(id)
             .fetch_one(&pool)
             .await
             .unwrap();
         assert_eq!((text.as_str(), kind.as_str()), (id.0.to_string().as_str(), "text"));
-        let (back,): (JobId,) = sqlx::query_as("SELECT ?").bind(&text).fetch_one(&pool).await.unwrap();
+        let (back,): (JobId,) = sqlx::query_as("SELECT $1").bind(&text).fetch_one(&pool).await.unwrap();
         assert_eq!(back, id);
         assert_eq!(serde_json::to_string(&id).unwrap(), format!("\"{text}\""));
         assert_eq!(id.to_string(), text);

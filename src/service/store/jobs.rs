@@ -8,15 +8,17 @@
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
-use sqlx::SqlitePool;
+use sqlx::any::{AnyTypeInfo, AnyValueRef};
+use sqlx::encode::IsNull;
+use sqlx::error::BoxDynError;
+use sqlx::{Any, AnyPool, Database};
 
 use super::ids::JobId;
 use super::{now_ms, Cursor, Writer};
 
 /// Where a job is in its life.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema, sqlx::Type)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
-#[sqlx(type_name = "TEXT", rename_all = "snake_case")]
 pub enum JobState {
     /// Waiting for a worker.
     Queued,
@@ -62,17 +64,41 @@ impl JobState {
     }
 }
 
+/// Stored as its name (TEXT), on either backend.
+impl sqlx::Type<Any> for JobState {
+    fn type_info() -> AnyTypeInfo {
+        <String as sqlx::Type<Any>>::type_info()
+    }
+
+    fn compatible(ty: &AnyTypeInfo) -> bool {
+        <String as sqlx::Type<Any>>::compatible(ty)
+    }
+}
+
+impl<'q> sqlx::Encode<'q, Any> for JobState {
+    fn encode_by_ref(&self, buf: &mut <Any as Database>::ArgumentBuffer<'q>) -> Result<IsNull, BoxDynError> {
+        <&str as sqlx::Encode<'q, Any>>::encode(self.as_str(), buf)
+    }
+}
+
+impl<'r> sqlx::Decode<'r, Any> for JobState {
+    fn decode(value: AnyValueRef<'r>) -> Result<Self, BoxDynError> {
+        let text = <String as sqlx::Decode<'r, Any>>::decode(value)?;
+        Self::parse(&text).ok_or_else(|| format!("not a job state: {text:?}").into())
+    }
+}
+
 /// Inside the deleting transaction: cancels the queued jobs of a deleted display (with `reason` as their
 /// last error) and asks the running ones to stop. Its finished jobs stay: they are the operator's record.
 pub async fn stop_jobs_of_display(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut sqlx::AnyConnection,
     id: &str,
     reason: &str,
     now: i64,
 ) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "UPDATE jobs SET state = 'cancelled', last_error = ?, finished_at = ?, updated_at = ?
-         WHERE display_id = ? AND state = 'queued'",
+        "UPDATE jobs SET state = 'cancelled', last_error = $1, finished_at = $2, updated_at = $3
+         WHERE display_id = $4 AND state = 'queued'",
     )
     .bind(reason)
     .bind(now)
@@ -80,12 +106,24 @@ pub async fn stop_jobs_of_display(
     .bind(id)
     .execute(&mut *tx)
     .await?;
-    sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = ? WHERE display_id = ? AND state = 'running'")
+    sqlx::query("UPDATE jobs SET cancel_requested = 1, updated_at = $1 WHERE display_id = $2 AND state = 'running'")
         .bind(now)
         .bind(id)
         .execute(&mut *tx)
         .await?;
     Ok(())
+}
+
+/// A flag stored as INTEGER 0/1 (the schema's type on both backends; sqlx's `Any` driver decodes no
+/// integer as a `bool`).
+#[derive(Clone, Copy, Debug, sqlx::Type)]
+#[sqlx(transparent)]
+pub struct IntFlag(pub i64);
+
+impl From<IntFlag> for bool {
+    fn from(f: IntFlag) -> bool {
+        f.0 != 0
+    }
 }
 
 /// A job row, as stored.
@@ -126,6 +164,7 @@ pub struct JobRow {
     /// Last error message.
     pub last_error: Option<String>,
     /// Cancel was asked for.
+    #[sqlx(try_from = "IntFlag")]
     pub cancel_requested: bool,
     /// Client's idempotency key.
     pub idempotency_key: Option<String>,
@@ -215,7 +254,7 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
         "INSERT INTO jobs (id, display_id, document_id, decoy_document_id, profile_id, profile_version, observers,
              method, options, state, max_attempts, idempotency_key, request_hash, created_at, updated_at,
              data_key, sealed_options)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?, ?, ?, ?)
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, 'queued', $10, $11, $12, $13, $14, $15, $16)
          ON CONFLICT (idempotency_key) DO NOTHING
          RETURNING {COLUMNS}"
     ))
@@ -240,7 +279,7 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
     if let Some(row) = inserted {
         return Ok(Enqueued::Created(row));
     }
-    let existing = sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE idempotency_key = ?"))
+    let existing = sqlx::query_as::<_, JobRow>(&format!("SELECT {COLUMNS} FROM jobs WHERE idempotency_key = $1"))
         .bind(&job.idempotency_key)
         .fetch_one(pool)
         .await?;
@@ -252,9 +291,9 @@ pub async fn enqueue(writer: &Writer, job: &NewJob) -> Result<Enqueued, sqlx::Er
 }
 
 /// One live (not deleted) job.
-pub async fn get(pool: &SqlitePool, id: JobId) -> Result<Option<JobRow>, sqlx::Error> {
+pub async fn get(pool: &AnyPool, id: JobId) -> Result<Option<JobRow>, sqlx::Error> {
     sqlx::query_as::<_, JobRow>(&format!(
-        "SELECT {COLUMNS} FROM jobs WHERE id = ? AND deleted_at IS NULL"
+        "SELECT {COLUMNS} FROM jobs WHERE id = $1 AND deleted_at IS NULL"
     ))
     .bind(id)
     .fetch_optional(pool)
@@ -272,7 +311,7 @@ pub struct JobFilter {
 
 /// Jobs newest first.
 pub async fn list(
-    pool: &SqlitePool,
+    pool: &AnyPool,
     filter: &JobFilter,
     limit: u32,
     cursor: Option<&Cursor>,
@@ -280,9 +319,9 @@ pub async fn list(
     let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, JobRow>(&format!(
         "SELECT {COLUMNS} FROM jobs
-         WHERE deleted_at IS NULL AND (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR display_id = ?2)
-           AND (created_at < ?3 OR (created_at = ?3 AND id < ?4) OR ?4 = '')
-         ORDER BY created_at DESC, id DESC LIMIT ?5"
+         WHERE deleted_at IS NULL AND ($1 IS NULL OR state = $1) AND ($2 IS NULL OR display_id = $2)
+           AND (created_at < $3 OR (created_at = $3 AND id < $4) OR $4 = '')
+         ORDER BY created_at DESC, id DESC LIMIT $5"
     ))
     .bind(filter.state.map(JobState::as_str))
     .bind(filter.display_id.as_deref())
@@ -302,9 +341,9 @@ pub async fn request_cancel(writer: &Writer, id: JobId) -> Result<Option<JobRow>
         "UPDATE jobs SET
              cancel_requested = CASE WHEN state IN ('queued', 'running') THEN 1 ELSE cancel_requested END,
              state = CASE WHEN state = 'queued' THEN 'cancelled' ELSE state END,
-             finished_at = CASE WHEN state = 'queued' THEN ?1 ELSE finished_at END,
-             updated_at = ?1
-         WHERE id = ?2 AND deleted_at IS NULL RETURNING {COLUMNS}"
+             finished_at = CASE WHEN state = 'queued' THEN $1 ELSE finished_at END,
+             updated_at = $1
+         WHERE id = $2 AND deleted_at IS NULL RETURNING {COLUMNS}"
     ))
     .bind(now)
     .bind(id)
@@ -322,8 +361,8 @@ pub async fn fail_exhausted(writer: &Writer, now: i64) -> Result<Vec<JobRow>, sq
              last_error = CASE WHEN cancel_requested = 1 THEN last_error
                  ELSE 'the worker stopped responding (lease expired) on attempt ' || attempts || ' of ' ||
                       max_attempts || COALESCE('; earlier error: ' || last_error, '') END,
-             lease_until = NULL, finished_at = ?1, updated_at = ?1
-         WHERE state = 'running' AND lease_until < ?1
+             lease_until = NULL, finished_at = $1, updated_at = $1
+         WHERE state = 'running' AND lease_until < $1
            AND (attempts >= max_attempts OR cancel_requested = 1 OR deleted_at IS NOT NULL)
          RETURNING {COLUMNS}"
     ))
@@ -342,16 +381,21 @@ pub async fn claim_next(
 ) -> Result<Option<JobRow>, sqlx::Error> {
     let pool = &writer.0;
     let lease_until = now + lease.as_millis() as i64;
-    // One statement, so SQLite's write lock makes the select-and-update atomic: two workers can never
-    // claim the same job.
+    // One statement. On SQLite its write lock makes the select-and-update atomic; on PostgreSQL the
+    // candidate row is locked with FOR UPDATE, and SKIP LOCKED lets concurrent workers pass over each
+    // other's candidates instead of waiting on them. Either way two workers can never claim the same job.
+    let lock = match writer.backend() {
+        super::Backend::Sqlite => "",
+        super::Backend::Postgres => "FOR UPDATE SKIP LOCKED",
+    };
     sqlx::query_as::<_, JobRow>(&format!(
-        "UPDATE jobs SET state = 'running', attempts = attempts + 1, lease_until = ?1, heartbeat_at = ?2,
-             worker_id = ?3, started_at = COALESCE(started_at, ?2), updated_at = ?2
+        "UPDATE jobs SET state = 'running', attempts = attempts + 1, lease_until = $1, heartbeat_at = $2,
+             worker_id = $3, started_at = COALESCE(started_at, $2), updated_at = $2
          WHERE id = (
              SELECT id FROM jobs
-             WHERE (state = 'queued' OR (state = 'running' AND lease_until < ?2))
+             WHERE (state = 'queued' OR (state = 'running' AND lease_until < $2))
                AND attempts < max_attempts AND deleted_at IS NULL
-             ORDER BY created_at, id LIMIT 1)
+             ORDER BY created_at, id LIMIT 1 {lock})
          RETURNING {COLUMNS}"
     ))
     .bind(lease_until)
@@ -372,9 +416,10 @@ pub async fn heartbeat(
 ) -> Result<Option<bool>, sqlx::Error> {
     let pool = &writer.0;
     let now = now_ms();
-    let row: Option<(bool,)> = sqlx::query_as(
-        "UPDATE jobs SET lease_until = ?1, heartbeat_at = ?2, progress = MAX(progress, ?3), updated_at = ?2
-         WHERE id = ?4 AND attempts = ?5 AND state = 'running'
+    let row: Option<(i64,)> = sqlx::query_as(
+        "UPDATE jobs SET lease_until = $1, heartbeat_at = $2,
+             progress = CASE WHEN progress > $3 THEN progress ELSE $3 END, updated_at = $2
+         WHERE id = $4 AND attempts = $5 AND state = 'running'
          RETURNING cancel_requested",
     )
     .bind(now + lease.as_millis() as i64)
@@ -384,7 +429,7 @@ pub async fn heartbeat(
     .bind(attempt)
     .fetch_optional(pool)
     .await?;
-    Ok(row.map(|(c,)| c))
+    Ok(row.map(|(c,)| c != 0))
 }
 
 /// What a finished bundle looks like in the row.
@@ -405,9 +450,9 @@ pub async fn mark_succeeded(writer: &Writer, id: JobId, attempt: i64, s: &Succes
     let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
-        "UPDATE jobs SET state = 'succeeded', progress = 1, sealed_summary = ?1, bundle_path = ?2,
-             bundle_files = ?3, solve_ms = ?4, lease_until = NULL, finished_at = ?5, updated_at = ?5
-         WHERE id = ?6 AND attempts = ?7 AND state = 'running' AND deleted_at IS NULL",
+        "UPDATE jobs SET state = 'succeeded', progress = 1, sealed_summary = $1, bundle_path = $2,
+             bundle_files = $3, solve_ms = $4, lease_until = NULL, finished_at = $5, updated_at = $5
+         WHERE id = $6 AND attempts = $7 AND state = 'running' AND deleted_at IS NULL",
     )
     .bind(&s.sealed_summary)
     .bind(&s.bundle_path)
@@ -433,9 +478,9 @@ pub async fn mark_ended(
     debug_assert!(matches!(state, JobState::Failed | JobState::Cancelled));
     let now = now_ms();
     let r = sqlx::query(
-        "UPDATE jobs SET state = ?1, last_error = COALESCE(?2, last_error), lease_until = NULL,
-             finished_at = ?3, updated_at = ?3
-         WHERE id = ?4 AND attempts = ?5 AND state = 'running'",
+        "UPDATE jobs SET state = $1, last_error = COALESCE($2, last_error), lease_until = NULL,
+             finished_at = $3, updated_at = $3
+         WHERE id = $4 AND attempts = $5 AND state = 'running'",
     )
     .bind(state.as_str())
     .bind(error)
@@ -459,9 +504,9 @@ pub async fn requeue(
     let pool = &writer.0;
     let now = now_ms();
     let r = sqlx::query(
-        "UPDATE jobs SET state = 'queued', attempts = attempts - ?1, last_error = COALESCE(?2, last_error),
-             lease_until = NULL, worker_id = NULL, progress = 0, updated_at = ?3
-         WHERE id = ?4 AND attempts = ?5 AND state = 'running'",
+        "UPDATE jobs SET state = 'queued', attempts = attempts - $1, last_error = COALESCE($2, last_error),
+             lease_until = NULL, worker_id = NULL, progress = 0, updated_at = $3
+         WHERE id = $4 AND attempts = $5 AND state = 'running'",
     )
     .bind(i64::from(refund))
     .bind(error)
@@ -474,7 +519,7 @@ pub async fn requeue(
 }
 
 /// Number of live jobs in each state.
-pub async fn count_by_state(pool: &SqlitePool) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
+pub async fn count_by_state(pool: &AnyPool) -> Result<Vec<(JobState, i64)>, sqlx::Error> {
     let rows: Vec<(String, i64)> =
         sqlx::query_as("SELECT state, COUNT(*) FROM jobs WHERE deleted_at IS NULL GROUP BY state")
             .fetch_all(pool)
@@ -512,7 +557,7 @@ pub struct Purged {
 /// options, evaluation summary and bundle listing and is kept as a tombstone (its audit trail refers to
 /// it). Returns the output directories to remove once the transaction has committed.
 pub async fn purge(
-    tx: &mut sqlx::SqliteConnection,
+    tx: &mut sqlx::AnyConnection,
     set: JobSet<'_>,
     reason: &str,
     now: i64,
@@ -523,15 +568,24 @@ pub async fn purge(
         JobSet::OfProfile(p) => (None, None, Some(p), None),
         JobSet::CreatedBefore(t) => (None, None, None, Some(t)),
     };
+    // An observer's profile id, from the observers' JSON array, in each backend's JSON functions.
+    let observer = match super::Backend::of_connection(tx) {
+        super::Backend::Sqlite => {
+            "EXISTS (SELECT 1 FROM json_each(jobs.observers) WHERE json_extract(value, '$.profile_id') = $3)"
+        }
+        super::Backend::Postgres => {
+            "EXISTS (SELECT 1 FROM jsonb_array_elements(jobs.observers::jsonb) o WHERE o ->> 'profile_id' = $3)"
+        }
+    };
     // A NULL parameter makes its comparison false, so exactly one line of the condition selects.
-    let rows: Vec<(String, Option<String>)> = sqlx::query_as(
+    let rows: Vec<(String, Option<String>)> = sqlx::query_as(&format!(
         "SELECT id, bundle_path FROM jobs WHERE deleted_at IS NULL AND (
-             id = ?1
-             OR document_id = ?2 OR decoy_document_id = ?2
-             OR profile_id = ?3
-             OR EXISTS (SELECT 1 FROM json_each(jobs.observers) WHERE json_extract(value, '$.profile_id') = ?3)
-             OR created_at < ?4)",
-    )
+             id = $1
+             OR document_id = $2 OR decoy_document_id = $2
+             OR profile_id = $3
+             OR {observer}
+             OR created_at < $4)"
+    ))
     .bind(&one)
     .bind(document)
     .bind(profile)
@@ -543,13 +597,13 @@ pub async fn purge(
         sqlx::query(
             "UPDATE jobs SET
                  cancel_requested = CASE WHEN state IN ('queued', 'running') THEN 1 ELSE cancel_requested END,
-                 last_error = CASE WHEN state = 'queued' THEN ?1 ELSE last_error END,
-                 finished_at = CASE WHEN state = 'queued' THEN ?2 ELSE finished_at END,
+                 last_error = CASE WHEN state = 'queued' THEN $1 ELSE last_error END,
+                 finished_at = CASE WHEN state = 'queued' THEN $2 ELSE finished_at END,
                  state = CASE WHEN state = 'queued' THEN 'cancelled' ELSE state END,
-                 deleted_at = ?2, data_key = NULL, sealed_options = NULL, evaluation_summary = NULL,
+                 deleted_at = $2, data_key = NULL, sealed_options = NULL, evaluation_summary = NULL,
                  sealed_summary = NULL,
-                 bundle_path = NULL, bundle_files = NULL, updated_at = ?2
-             WHERE id = ?3",
+                 bundle_path = NULL, bundle_files = NULL, updated_at = $2
+             WHERE id = $3",
         )
         .bind(reason)
         .bind(now)
@@ -563,7 +617,7 @@ pub async fn purge(
 }
 
 /// Live jobs stored before sealing (no data key yet).
-pub async fn unsealed(pool: &SqlitePool) -> Result<Vec<JobRow>, sqlx::Error> {
+pub async fn unsealed(pool: &AnyPool) -> Result<Vec<JobRow>, sqlx::Error> {
     sqlx::query_as::<_, JobRow>(&format!(
         "SELECT {COLUMNS} FROM jobs WHERE data_key IS NULL AND deleted_at IS NULL"
     ))
@@ -588,8 +642,8 @@ pub struct Sealing<'a> {
 /// sealed parts, its summary sealed.
 pub async fn set_sealed(writer: &Writer, id: JobId, s: &Sealing<'_>) -> Result<(), sqlx::Error> {
     sqlx::query(
-        "UPDATE jobs SET data_key = ?, options = ?, sealed_options = ?, sealed_summary = ?, evaluation_summary = NULL
-         WHERE id = ? AND deleted_at IS NULL",
+        "UPDATE jobs SET data_key = $1, options = $2, sealed_options = $3, sealed_summary = $4, evaluation_summary = NULL
+         WHERE id = $5 AND deleted_at IS NULL",
     )
     .bind(s.data_key)
     .bind(s.options)
@@ -603,7 +657,7 @@ pub async fn set_sealed(writer: &Writer, id: JobId, s: &Sealing<'_>) -> Result<(
 
 /// Output directories (relative to the data directory) of every live job, for sweeping the ones nobody
 /// refers to.
-pub async fn live_bundle_paths(pool: &SqlitePool) -> Result<Vec<String>, sqlx::Error> {
+pub async fn live_bundle_paths(pool: &AnyPool) -> Result<Vec<String>, sqlx::Error> {
     let rows: Vec<(String,)> =
         sqlx::query_as("SELECT bundle_path FROM jobs WHERE deleted_at IS NULL AND bundle_path IS NOT NULL")
             .fetch_all(pool)

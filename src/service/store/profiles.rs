@@ -1,6 +1,6 @@
 //! Vision profiles: metadata rows and sealed versions.
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 
 use super::{now_ms, Cursor, Writer};
 use crate::service::crypto::{profile_aad, MasterKey};
@@ -63,7 +63,7 @@ pub async fn insert(
     let sealed = key.seal(profile_json, &profile_aad(id, 1))?;
     let mut tx = pool.begin().await?;
     let row = sqlx::query_as::<_, ProfileRow>(&format!(
-        "INSERT INTO profiles (id, label, current_version, created_at, updated_at) VALUES (?, ?, 1, ?, ?)
+        "INSERT INTO profiles (id, label, current_version, created_at, updated_at) VALUES ($1, $2, 1, $3, $4)
          RETURNING {COLUMNS}"
     ))
     .bind(id)
@@ -73,7 +73,7 @@ pub async fn insert(
     .fetch_one(&mut *tx)
     .await?;
     sqlx::query(
-        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, 1, ?, ?, ?)",
+        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES ($1, 1, $2, $3, $4)",
     )
     .bind(id)
     .bind(sealed.nonce)
@@ -99,8 +99,8 @@ pub async fn add_version(
     // re-enrolments serialise and get distinct versions (no read-then-upgrade deadlock).
     let mut tx = pool.begin().await?;
     let row = sqlx::query_as::<_, ProfileRow>(&format!(
-        "UPDATE profiles SET current_version = current_version + 1, updated_at = ?, label = COALESCE(?, label)
-         WHERE id = ? AND deleted_at IS NULL RETURNING {COLUMNS}"
+        "UPDATE profiles SET current_version = current_version + 1, updated_at = $1, label = COALESCE($2, label)
+         WHERE id = $3 AND deleted_at IS NULL RETURNING {COLUMNS}"
     ))
     .bind(now)
     .bind(label)
@@ -112,7 +112,7 @@ pub async fn add_version(
     };
     let sealed = key.seal(profile_json, &profile_aad(id, row.current_version))?;
     sqlx::query(
-        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES (?, ?, ?, ?, ?)",
+        "INSERT INTO profile_versions (profile_id, version, nonce, ciphertext, created_at) VALUES ($1, $2, $3, $4, $5)",
     )
     .bind(id)
     .bind(row.current_version)
@@ -126,9 +126,9 @@ pub async fn add_version(
 }
 
 /// A live (not deleted) profile's metadata.
-pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<ProfileRow>, sqlx::Error> {
+pub async fn get(pool: &AnyPool, id: &str) -> Result<Option<ProfileRow>, sqlx::Error> {
     sqlx::query_as::<_, ProfileRow>(&format!(
-        "SELECT {COLUMNS} FROM profiles WHERE id = ? AND deleted_at IS NULL"
+        "SELECT {COLUMNS} FROM profiles WHERE id = $1 AND deleted_at IS NULL"
     ))
     .bind(id)
     .fetch_optional(pool)
@@ -136,11 +136,11 @@ pub async fn get(pool: &SqlitePool, id: &str) -> Result<Option<ProfileRow>, sqlx
 }
 
 /// One sealed version of a live profile.
-pub async fn get_version(pool: &SqlitePool, id: &str, version: i64) -> Result<Option<ProfileVersionRow>, sqlx::Error> {
+pub async fn get_version(pool: &AnyPool, id: &str, version: i64) -> Result<Option<ProfileVersionRow>, sqlx::Error> {
     sqlx::query_as::<_, ProfileVersionRow>(
         "SELECT v.profile_id, v.version, v.nonce, v.ciphertext, v.created_at
          FROM profile_versions v JOIN profiles p ON p.id = v.profile_id
-         WHERE v.profile_id = ? AND v.version = ? AND p.deleted_at IS NULL",
+         WHERE v.profile_id = $1 AND v.version = $2 AND p.deleted_at IS NULL",
     )
     .bind(id)
     .bind(version)
@@ -149,7 +149,7 @@ pub async fn get_version(pool: &SqlitePool, id: &str, version: i64) -> Result<Op
 }
 
 /// Live profiles, newest first.
-pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<ProfileRow>, sqlx::Error> {
+pub async fn list(pool: &AnyPool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<ProfileRow>, sqlx::Error> {
     super::list_page(pool, "profiles", COLUMNS, true, limit, cursor).await
 }
 
@@ -160,7 +160,7 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<Option<super::jobs::Pur
     let pool = &writer.0;
     let now = now_ms();
     let mut tx = pool.begin().await?;
-    let done = sqlx::query("UPDATE profiles SET deleted_at = ?, updated_at = ? WHERE id = ? AND deleted_at IS NULL")
+    let done = sqlx::query("UPDATE profiles SET deleted_at = $1, updated_at = $2 WHERE id = $3 AND deleted_at IS NULL")
         .bind(now)
         .bind(now)
         .bind(id)
@@ -171,7 +171,7 @@ pub async fn delete(writer: &Writer, id: &str) -> Result<Option<super::jobs::Pur
     if !done {
         return Ok(None);
     }
-    sqlx::query("DELETE FROM profile_versions WHERE profile_id = ?")
+    sqlx::query("DELETE FROM profile_versions WHERE profile_id = $1")
         .bind(id)
         .execute(&mut *tx)
         .await?;

@@ -1,6 +1,6 @@
 //! Scoped operator tokens: names, scopes and the SHA-256 of each secret.
 
-use sqlx::SqlitePool;
+use sqlx::AnyPool;
 
 use super::{now_ms, Cursor, Writer};
 
@@ -32,7 +32,7 @@ pub async fn insert(
     hash: &[u8; 32],
 ) -> Result<Option<TokenRow>, sqlx::Error> {
     let r = sqlx::query_as::<_, TokenRow>(&format!(
-        "INSERT INTO tokens (id, name, scopes, token_hash, created_at) VALUES (?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+        "INSERT INTO tokens (id, name, scopes, token_hash, created_at) VALUES ($1, $2, $3, $4, $5) RETURNING {COLUMNS}"
     ))
     .bind(id)
     .bind(name)
@@ -49,9 +49,9 @@ pub async fn insert(
 }
 
 /// The live token with this hash.
-pub async fn by_hash(pool: &SqlitePool, hash: &[u8; 32]) -> Result<Option<TokenRow>, sqlx::Error> {
+pub async fn by_hash(pool: &AnyPool, hash: &[u8; 32]) -> Result<Option<TokenRow>, sqlx::Error> {
     sqlx::query_as::<_, TokenRow>(&format!(
-        "SELECT {COLUMNS} FROM tokens WHERE token_hash = ? AND revoked_at IS NULL"
+        "SELECT {COLUMNS} FROM tokens WHERE token_hash = $1 AND revoked_at IS NULL"
     ))
     .bind(&hash[..])
     .fetch_optional(pool)
@@ -59,12 +59,12 @@ pub async fn by_hash(pool: &SqlitePool, hash: &[u8; 32]) -> Result<Option<TokenR
 }
 
 /// Live tokens, newest first.
-pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<TokenRow>, sqlx::Error> {
+pub async fn list(pool: &AnyPool, limit: u32, cursor: Option<&Cursor>) -> Result<Vec<TokenRow>, sqlx::Error> {
     let (at, id) = cursor.map(|c| (c.created_at, c.id.as_str())).unwrap_or((i64::MAX, ""));
     sqlx::query_as::<_, TokenRow>(&format!(
         "SELECT {COLUMNS} FROM tokens WHERE revoked_at IS NULL
-           AND (created_at < ?1 OR (created_at = ?1 AND id < ?2) OR ?2 = '')
-         ORDER BY created_at DESC, id DESC LIMIT ?3"
+           AND (created_at < $1 OR (created_at = $1 AND id < $2) OR $2 = '')
+         ORDER BY created_at DESC, id DESC LIMIT $3"
     ))
     .bind(at)
     .bind(id)
@@ -75,7 +75,7 @@ pub async fn list(pool: &SqlitePool, limit: u32, cursor: Option<&Cursor>) -> Res
 
 /// Revokes a live token; false when there is none with this id.
 pub async fn revoke(writer: &Writer, id: &str) -> Result<bool, sqlx::Error> {
-    let r = sqlx::query("UPDATE tokens SET revoked_at = ? WHERE id = ? AND revoked_at IS NULL")
+    let r = sqlx::query("UPDATE tokens SET revoked_at = $1 WHERE id = $2 AND revoked_at IS NULL")
         .bind(now_ms())
         .bind(id)
         .execute(&writer.0)
