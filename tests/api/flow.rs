@@ -7,11 +7,18 @@ use reqwest::StatusCode;
 use serde_json::json;
 use sha2::{Digest as _, Sha256};
 
-use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, OPERATOR_TOKEN};
+use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, TestApp, OPERATOR_TOKEN};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_whole_flow_from_enrolment_to_a_verified_bundle() {
     let app = spawn_app_with(|c| c.workers = 1).await;
+    whole_flow(&app).await;
+}
+
+/// Enrolment, a job followed over server-sent events, the display's notification and download (every file
+/// checked against the listing and the manifest), the evaluation and views, and the target's view
+/// simulated again from the downloaded frames. `app` runs one worker.
+pub async fn whole_flow(app: &TestApp) {
     let f = app.fixtures().await;
     let observer = app
         .enrol(&eyekey_core::physics::profile::VisionProfile::perfect())

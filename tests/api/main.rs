@@ -19,6 +19,7 @@ mod flow;
 mod jobs;
 mod openapi;
 mod operations;
+mod postgres;
 mod profiles;
 mod queue;
 mod restart;
