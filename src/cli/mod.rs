@@ -226,9 +226,14 @@ pub struct BenchArgs {
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
     pub sub_rays: u32,
-    /// Which benchmark: transport, wave, solver, encode, job (the `secure` default job end to end) or all.
+    /// Which benchmark: transport, wave, solver, encode, job (the `secure` default job end to end) or all;
+    /// or scale (PostgreSQL, two API processes, 1/2/4 worker processes; not part of all).
     #[arg(long, default_value = "all")]
     pub section: String,
+    /// For `--section scale`: an existing PostgreSQL server's URL (default: a throwaway server started by
+    /// tests/postgres/server.sh); each worker count gets a new database on it.
+    #[arg(long, hide_env_values = true)]
+    pub database_url: Option<String>,
     /// Markdown file whose `<!-- bench:… -->` sections are replaced with the new figures.
     #[arg(long, default_value = "BENCHMARKS.md")]
     pub out: PathBuf,

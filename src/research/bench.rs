@@ -628,11 +628,17 @@ struct BenchRun<'a> {
 
 /// `eyekey bench`: runs the selected sections; each prints its Markdown and replaces its section of `args.out`.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.section == "scale" {
+        let stamp = chrono::Utc::now().format("%Y-%m-%d %H:%M UTC").to_string();
+        let body = super::scale::run(args.database_url.as_deref(), &stamp)?;
+        print!("{body}");
+        return write_section(&args.out, "scale", &body);
+    }
     let display = DisplayGeometry::preset(&args.preset)?;
     let all = args.section == "all";
     if !all && !SECTIONS.contains(&args.section.as_str()) {
         bail!(
-            "--section must be transport, wave, solver, encode, job or all, got {:?}",
+            "--section must be transport, wave, solver, encode, job, all or scale, got {:?}",
             args.section
         );
     }

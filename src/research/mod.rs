@@ -7,6 +7,7 @@ pub mod calibration;
 pub mod defaults;
 pub mod encoders;
 pub mod experiment;
+pub mod scale;
 pub mod wave;
 
 /// A view's known-font reading for a table cell: `"4021" (3/4)`, or – when it was not read.

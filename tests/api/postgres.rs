@@ -16,7 +16,9 @@ use reqwest::StatusCode;
 use serde_json::{json, Value};
 use sqlx::Connection as _;
 
-use crate::helpers::{document_png, expect_json, fast_options, myope, spawn_app_with, tiny_display, OPERATOR_TOKEN};
+use crate::helpers::{
+    document_png, expect_json, fast_options, myope, read_events, spawn_app_with, tiny_display, OPERATOR_TOKEN,
+};
 
 /// The test server's administrative URL (database `postgres`), started on first use.
 fn server() -> &'static str {
@@ -315,6 +317,11 @@ impl Remote {
 
     /// A profile, a display (the tiny one, or a preset) and a document: the body of a job with fast options.
     async fn job_body(&self, preset: Option<&str>, document_side: u32) -> Value {
+        self.job_body_and_token(preset, document_side).await.0
+    }
+
+    /// [`Self::job_body`], and the display's token.
+    async fn job_body_and_token(&self, preset: Option<&str>, document_side: u32) -> (Value, String) {
         let profile = self
             .post("/v1/profiles", &json!({ "label": "p", "profile": myope() }))
             .await;
@@ -337,12 +344,13 @@ impl Remote {
         let document = expect_json(r, StatusCode::CREATED).await;
         let mut options = fast_options();
         options["optics"] = json!("geometric");
-        json!({
+        let body = json!({
             "display_id": display["display"]["id"],
             "document_id": document["id"],
             "profile_id": profile["id"],
             "options": options,
-        })
+        });
+        (body, display["token"].as_str().unwrap().to_string())
     }
 
     async fn wait_for_terminal(&self, id: &str, timeout: Duration) -> Value {
@@ -514,10 +522,68 @@ async fn a_worker_started_before_the_api_waits_for_the_schema_then_runs_jobs() {
     worker
         .wait_for_line("eyekey worker running", Duration::from_secs(60))
         .await;
-    let body = remote.job_body(None, 24).await;
+    let (body, display_token) = remote.job_body_and_token(None, 24).await;
+    // The display's stream and the job's stream, through the API process, follow a job that a worker in
+    // another process runs (the change feed: LISTEN/NOTIFY).
+    let get = |path: String, token: &str| {
+        remote
+            .client
+            .get(format!("{}{path}", remote.base))
+            .bearer_auth(token)
+            .send()
+    };
+    let display_events = get("/v1/frames/events".into(), &display_token).await.unwrap();
+    let notified = tokio::spawn(read_events(display_events, Duration::from_secs(120), |name, _| {
+        name == "job_succeeded"
+    }));
     let id = remote.post("/v1/jobs", &body).await["id"].as_str().unwrap().to_string();
-    let job = remote.wait_for_terminal(&id, Duration::from_secs(120)).await;
-    assert_eq!(job["state"], "succeeded", "{job}\n{}", worker.log());
+    let stream = get(format!("/v1/jobs/{id}/events"), OPERATOR_TOKEN).await.unwrap();
+    let events = read_events(stream, Duration::from_secs(120), |_, v| {
+        matches!(v["state"].as_str(), Some("succeeded" | "failed" | "cancelled"))
+    })
+    .await;
+    let last = &events.last().expect("job events arrive").1;
+    assert_eq!(last["state"], "succeeded", "{last}\n{}", worker.log());
+    let note = notified.await.unwrap();
+    assert_eq!(
+        note.last().map(|(_, v)| v["id"].as_str().unwrap()),
+        Some(id.as_str()),
+        "the display hears of the bundle"
+    );
     worker.stop().await;
+    api.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_stopped_gracefully_requeues_its_job_without_counting_the_attempt() {
+    let url = fresh_database().await;
+    let dir = tempfile::tempdir().unwrap();
+    let mut api = Process::api("api", dir.path(), &url);
+    let remote = Remote::new(api.address().await);
+    let mut body = remote.job_body(Some("small"), 48).await;
+    body["options"]["max_iterations"] = json!(3000);
+    body["options"]["tolerance"] = json!(1e-12);
+    let id = remote.post("/v1/jobs", &body).await["id"].as_str().unwrap().to_string();
+    let a = Process::worker("worker-a", dir.path(), &url, 30);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while remote.get(&format!("/v1/jobs/{id}")).await["state"] != "running" {
+        assert!(Instant::now() < deadline, "the job never started:\n{}", a.log());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // SIGTERM: the worker stops its solve and puts the job back, its attempt not counted.
+    a.stop().await;
+    let job = remote.get(&format!("/v1/jobs/{id}")).await;
+    assert_eq!(
+        (job["state"].as_str(), job["attempts"].as_i64()),
+        (Some("queued"), Some(0)),
+        "{job}"
+    );
+    // Another worker then runs it to the end in one attempt (its lease is 30 s: no wait for an expiry).
+    let b = Process::worker("worker-b", dir.path(), &url, 30);
+    let job = remote.wait_for_terminal(&id, Duration::from_secs(180)).await;
+    assert_eq!(job["state"], "succeeded", "{job}\n{}", b.log());
+    assert_eq!(job["attempts"], 1);
+    assert_eq!(output_dirs(&url, &id).await, [format!("jobs/{id}-1")]);
+    b.stop().await;
     api.stop().await;
 }
