@@ -447,7 +447,7 @@ async fn two_api_processes_and_three_workers_complete_fifty_jobs_each_exactly_on
     let workers: Vec<Process> = (1..=3)
         .map(|n| Process::worker(&format!("worker-{n}"), dir.path(), &url, 30))
         .collect();
-    let body = apis[0].job_body(None, 24).await;
+    let (body, display_token) = apis[0].job_body_and_token(None, 24).await;
     let mut ids = Vec::new();
     for n in 0..50 {
         // Alternate the API process each job is submitted through.
@@ -477,6 +477,21 @@ async fn two_api_processes_and_three_workers_complete_fifty_jobs_each_exactly_on
         assert_eq!(bundle.as_deref(), Some(format!("jobs/{id}-1").as_str()));
         assert_eq!(output_dirs(&url, id).await, [format!("jobs/{id}-1")]);
     }
+    // The display downloads the same bundle through either API process.
+    let mut zips = Vec::new();
+    for api in &apis {
+        let r = api
+            .client
+            .get(format!("{}/v1/frames/jobs/{}/bundle.zip", api.base, ids[7]))
+            .bearer_auth(&display_token)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), StatusCode::OK);
+        zips.push(r.bytes().await.unwrap());
+    }
+    assert!(!zips[0].is_empty());
+    assert_eq!(zips[0], zips[1]);
     let workers_used: std::collections::HashSet<&str> = per_job.iter().map(|(_, _, _, w)| w.as_str()).collect();
     assert_eq!(workers_used.len(), 3, "all three workers ran jobs");
     let (creates,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM audit_log WHERE action = 'job.create'")
@@ -586,4 +601,49 @@ async fn a_worker_stopped_gracefully_requeues_its_job_without_counting_the_attem
     assert_eq!(output_dirs(&url, &id).await, [format!("jobs/{id}-1")]);
     b.stop().await;
     api.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn api_processes_starting_at_the_same_moment_share_one_schema_and_one_master_key() {
+    for _round in 0..5 {
+        let url = fresh_database().await;
+        let dir = tempfile::tempdir().unwrap();
+        let mut apis: Vec<Process> = (1..=4)
+            .map(|n| Process::api(&format!("api-{n}"), dir.path(), &url))
+            .collect();
+        for api in &mut apis {
+            api.address().await;
+        }
+        let mut conn = sqlx::PgConnection::connect(&url).await.unwrap();
+        let (migrations,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM _sqlx_migrations WHERE success")
+            .fetch_one(&mut conn)
+            .await
+            .unwrap();
+        assert_eq!(migrations as usize, store::POSTGRES_MIGRATOR.iter().count());
+        let (sentinels,): (i64,) = sqlx::query_as("SELECT COUNT(*) FROM settings")
+            .fetch_one(&mut conn)
+            .await
+            .unwrap();
+        assert_eq!(sentinels, 1);
+        for api in apis {
+            api.stop().await;
+        }
+    }
+    // A process with another master key is refused, naming the reason.
+    let url = fresh_database().await;
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = Process::api("first", dir.path(), &url);
+    first.address().await;
+    let data = dir.path().join("other");
+    std::fs::create_dir_all(&data).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_eyekey"))
+        .args(["worker", "--database-url", &url, "--data-dir"])
+        .arg(&data)
+        .env("EYEKEY_MASTER_KEY", "11".repeat(32))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("master key does not match"), "{stderr}");
+    first.stop().await;
 }

@@ -332,32 +332,25 @@ pub async fn check_master_key(writer: &Writer, key: &super::crypto::MasterKey) -
     const NAME: &str = "master_key_check";
     const PLAIN: &[u8] = b"eyekey master key check";
     let pool = &writer.0;
-    let row: Option<(Vec<u8>,)> = sqlx::query_as("SELECT value FROM settings WHERE name = $1")
+    // The first process to start writes the sentinel; processes starting at the same moment (several API
+    // processes on one PostgreSQL database) insert nothing and check the one that won.
+    let sealed = key.seal(PLAIN, NAME.as_bytes())?;
+    let mut value = sealed.nonce;
+    value.extend_from_slice(&sealed.ciphertext);
+    sqlx::query("INSERT INTO settings (name, value, created_at) VALUES ($1, $2, $3) ON CONFLICT (name) DO NOTHING")
         .bind(NAME)
-        .fetch_optional(pool)
+        .bind(value)
+        .bind(now_ms())
+        .execute(pool)
         .await?;
-    match row {
-        Some((value,)) => {
-            let (nonce, ct) = value.split_at(super::crypto::NONCE_LEN.min(value.len()));
-            match key.open(nonce, ct, NAME.as_bytes()) {
-                Ok(p) if p == PLAIN => Ok(()),
-                _ => anyhow::bail!(
-                    "the master key does not match the one this data directory's profiles were sealed with"
-                ),
-            }
-        }
-        None => {
-            let sealed = key.seal(PLAIN, NAME.as_bytes())?;
-            let mut value = sealed.nonce;
-            value.extend_from_slice(&sealed.ciphertext);
-            sqlx::query("INSERT INTO settings (name, value, created_at) VALUES ($1, $2, $3)")
-                .bind(NAME)
-                .bind(value)
-                .bind(now_ms())
-                .execute(pool)
-                .await?;
-            Ok(())
-        }
+    let (value,): (Vec<u8>,) = sqlx::query_as("SELECT value FROM settings WHERE name = $1")
+        .bind(NAME)
+        .fetch_one(pool)
+        .await?;
+    let (nonce, ct) = value.split_at(super::crypto::NONCE_LEN.min(value.len()));
+    match key.open(nonce, ct, NAME.as_bytes()) {
+        Ok(p) if p == PLAIN => Ok(()),
+        _ => anyhow::bail!("the master key does not match the one this database's data was sealed with"),
     }
 }
 
