@@ -77,8 +77,10 @@ async fn address_of(p: &Proc) -> Result<String> {
     }
 }
 
-/// A throwaway PostgreSQL server (through the repository's script) or the one given.
-fn server(given: Option<&str>) -> Result<String> {
+/// The URL of a PostgreSQL server's `postgres` database: the one given, or a throwaway server that
+/// `tests/postgres/server.sh` starts on 127.0.0.1 and a free port (installing Debian's package if missing,
+/// as root) and stops once this process has ended. The tests use it too.
+pub fn postgres_server(given: Option<&str>) -> Result<String> {
     if let Some(url) = given {
         return Ok(url.to_string());
     }
@@ -98,7 +100,8 @@ fn server(given: Option<&str>) -> Result<String> {
     Ok(String::from_utf8(out.stdout)?.trim().to_string())
 }
 
-async fn fresh_database(admin: &str) -> Result<String> {
+/// Creates a new, empty database on the server whose administrative URL is `admin`; returns its URL.
+pub async fn fresh_database(admin: &str) -> Result<String> {
     let name = format!("eyekey_bench_{}", uuid::Uuid::new_v4().simple());
     let mut conn = sqlx::PgConnection::connect(admin).await?;
     sqlx::query(&format!("CREATE DATABASE {name}"))
@@ -316,7 +319,7 @@ async fn measure(admin: &str, workers: usize) -> Result<Figures> {
 
 /// Runs the section; returns its Markdown.
 pub fn run(database_url: Option<&str>, stamp: &str) -> Result<String> {
-    let admin = server(database_url)?;
+    let admin = postgres_server(database_url)?;
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let mut rows = Vec::new();
     for workers in [1, 2, 4] {

@@ -7,7 +7,7 @@
 
 use std::io::{BufRead as _, Seek as _};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -24,40 +24,17 @@ use crate::helpers::{
 fn server() -> &'static str {
     static SERVER: OnceLock<String> = OnceLock::new();
     SERVER.get_or_init(|| {
-        if let Ok(url) = std::env::var("EYEKEY_TEST_POSTGRES_URL") {
-            return url;
-        }
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/postgres/server.sh");
-        let dir = std::env::temp_dir().join(format!("eyekey-test-pg-{}", std::process::id()));
-        let out = Command::new("bash")
-            .arg(&script)
-            .arg("start")
-            .arg(&dir)
-            .arg(std::process::id().to_string())
-            .stderr(Stdio::inherit())
-            .output()
-            .expect("running tests/postgres/server.sh");
-        assert!(
-            out.status.success(),
-            "tests/postgres/server.sh could not start PostgreSQL (see above)"
-        );
-        String::from_utf8(out.stdout).unwrap().trim().to_string()
+        let given = std::env::var("EYEKEY_TEST_POSTGRES_URL").ok();
+        eyekey::research::scale::postgres_server(given.as_deref())
+            .unwrap_or_else(|e| panic!("no PostgreSQL for the tests: {e:#}"))
     })
 }
 
 /// A new, empty database on the test server.
 async fn fresh_database() -> String {
-    let admin = server();
-    let name = format!("eyekey_{}", uuid::Uuid::new_v4().simple());
-    let mut conn = sqlx::PgConnection::connect(admin)
+    eyekey::research::scale::fresh_database(server())
         .await
-        .unwrap_or_else(|e| panic!("connecting to the test PostgreSQL at {admin}: {e}"));
-    sqlx::query(&format!("CREATE DATABASE {name}"))
-        .execute(&mut conn)
-        .await
-        .unwrap();
-    let base = admin.rsplit_once('/').unwrap().0;
-    format!("{base}/{name}")
+        .unwrap_or_else(|e| panic!("a database on the test PostgreSQL at {}: {e:#}", server()))
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -353,6 +330,15 @@ impl Remote {
         (body, display["token"].as_str().unwrap().to_string())
     }
 
+    /// Queues a job of a few seconds (the `small` preset with an iteration cap the tolerance will not cut
+    /// short); returns its id.
+    async fn queue_slow_job(&self) -> String {
+        let mut body = self.job_body(Some("small"), 48).await;
+        body["options"]["max_iterations"] = json!(3000);
+        body["options"]["tolerance"] = json!(1e-12);
+        self.post("/v1/jobs", &body).await["id"].as_str().unwrap().to_string()
+    }
+
     async fn wait_for_terminal(&self, id: &str, timeout: Duration) -> Value {
         let deadline = Instant::now() + timeout;
         loop {
@@ -389,12 +375,7 @@ async fn a_worker_killed_mid_solve_loses_nothing_and_the_job_completes_exactly_o
     let dir = tempfile::tempdir().unwrap();
     let mut api = Process::api("api", dir.path(), &url);
     let remote = Remote::new(api.address().await);
-    // A job of a few seconds: the `small` preset with an iteration cap the tolerance will not cut short.
-    let mut body = remote.job_body(Some("small"), 48).await;
-    body["options"]["max_iterations"] = json!(3000);
-    body["options"]["tolerance"] = json!(1e-12);
-    let job = remote.post("/v1/jobs", &body).await;
-    let id = job["id"].as_str().unwrap().to_string();
+    let id = remote.queue_slow_job().await;
 
     // Worker A alone claims it; once it is solving, B starts and A is killed.
     let mut a = Process::worker("worker-a", dir.path(), &url, 2);
@@ -575,10 +556,7 @@ async fn a_worker_stopped_gracefully_requeues_its_job_without_counting_the_attem
     let dir = tempfile::tempdir().unwrap();
     let mut api = Process::api("api", dir.path(), &url);
     let remote = Remote::new(api.address().await);
-    let mut body = remote.job_body(Some("small"), 48).await;
-    body["options"]["max_iterations"] = json!(3000);
-    body["options"]["tolerance"] = json!(1e-12);
-    let id = remote.post("/v1/jobs", &body).await["id"].as_str().unwrap().to_string();
+    let id = remote.queue_slow_job().await;
     let a = Process::worker("worker-a", dir.path(), &url, 30);
     let deadline = Instant::now() + Duration::from_secs(60);
     while remote.get(&format!("/v1/jobs/{id}")).await["state"] != "running" {
