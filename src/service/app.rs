@@ -251,6 +251,13 @@ async fn open(config: Config, role: Role) -> anyhow::Result<Opened> {
         }
     }
 
+    if role == Role::Worker && config.master_key_hex.is_none() && !data_dir.join(MASTER_KEY_FILE).exists() {
+        anyhow::bail!(
+            "a worker needs the master key the API processes use: give it with EYEKEY_MASTER_KEY (or put it in \
+             {}); a worker never makes one",
+            data_dir.join(MASTER_KEY_FILE).display()
+        );
+    }
     let (db, writer) = match role {
         Role::Api => {
             let (db, writer) = store::connect(&location)
@@ -315,7 +322,13 @@ async fn wait_for_schema(location: &store::Location) -> (sqlx::AnyPool, store::W
     loop {
         let why = match store::connect(location).await {
             Ok((db, writer)) => match store::migrations_applied(&db).await {
-                Ok(true) => return (db, writer),
+                // The first API process writes the master key's sentinel right after migrating; a worker
+                // only ever checks it, so a worker can never lock the API processes out with another key.
+                Ok(true) => match store::holds_master_key_check(&writer).await {
+                    Ok(true) => return (db, writer),
+                    Ok(false) => "no API process (eyekey serve) has started on it yet".to_string(),
+                    Err(e) => format!("{e}"),
+                },
                 Ok(false) => "an API process (eyekey serve) has not yet applied every migration".to_string(),
                 Err(e) if e.as_database_error().is_some() => {
                     format!("no schema yet (eyekey serve applies it): {e}")

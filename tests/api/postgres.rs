@@ -512,6 +512,17 @@ async fn a_worker_started_before_the_api_waits_for_the_schema_then_runs_jobs() {
         .await
         .unwrap();
     assert!(tables.is_empty(), "the worker created no schema: {tables:?}");
+    // A worker without the master key is refused at once: it never makes one.
+    let bare = dir.path().join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_eyekey"))
+        .args(["worker", "--database-url", &url, "--data-dir"])
+        .arg(&bare)
+        .env_remove("EYEKEY_MASTER_KEY")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("needs the master key"));
 
     let mut api = Process::api("api", dir.path(), &url);
     let remote = Remote::new(api.address().await);
