@@ -140,6 +140,12 @@ async fn post(client: &reqwest::Client, url: String, body: &Value) -> Result<Val
     Ok(v)
 }
 
+/// Creates a job from `body` through the API process at `base`; returns its id.
+async fn submit(client: &reqwest::Client, base: &str, body: &Value) -> Result<String> {
+    let job = post(client, format!("{base}/v1/jobs"), body).await?;
+    Ok(job["id"].as_str().unwrap_or_default().to_string())
+}
+
 /// The job every run submits: the `small` preset, a 48×48 document, a sampled target, options that keep
 /// a job to about a second (geometric optics, 40 iterations, one decoy, no population evaluation).
 async fn job_body(client: &reqwest::Client, base: &str) -> Result<Value> {
@@ -221,12 +227,7 @@ async fn measure(admin: &str, workers: usize) -> Result<Figures> {
     // Warm-up: one job per worker, so every worker has connected and built its operators once.
     let mut warm = Vec::new();
     for _ in 0..workers {
-        warm.push(
-            post(&client, format!("{}/v1/jobs", bases[0]), &body).await?["id"]
-                .as_str()
-                .unwrap_or_default()
-                .to_string(),
-        );
+        warm.push(submit(&client, &bases[0], &body).await?);
     }
     wait_all(&client, &bases[1], &warm).await?;
 
@@ -234,10 +235,7 @@ async fn measure(admin: &str, workers: usize) -> Result<Figures> {
     let mut conn = sqlx::PgConnection::connect(&url).await?;
     let mut claims = Vec::new();
     for n in 0..CLAIMS {
-        let id = post(&client, format!("{}/v1/jobs", bases[n % 2]), &body).await?["id"]
-            .as_str()
-            .unwrap_or_default()
-            .to_string();
+        let id = submit(&client, &bases[n % 2], &body).await?;
         wait_all(&client, &bases[(n + 1) % 2], std::slice::from_ref(&id)).await?;
         let (created, started): (i64, i64) = sqlx::query_as("SELECT created_at, started_at FROM jobs WHERE id = $1")
             .bind(&id)
@@ -251,58 +249,47 @@ async fn measure(admin: &str, workers: usize) -> Result<Figures> {
     let started = Instant::now();
     let mut ids = Vec::new();
     for n in 0..JOBS {
-        ids.push(
-            post(&client, format!("{}/v1/jobs", bases[n % 2]), &body).await?["id"]
-                .as_str()
-                .unwrap_or_default()
-                .to_string(),
-        );
+        ids.push(submit(&client, &bases[n % 2], &body).await?);
     }
-    let reads = {
-        let (client, bases, ids) = (client.clone(), bases.clone(), ids.clone());
-        tokio::spawn(async move {
-            let t0 = Instant::now();
-            let mut lat = Vec::with_capacity(STATUS_READS);
-            let per_task = STATUS_READS / 8;
-            let tasks: Vec<_> = (0..8)
-                .map(|t| {
-                    let (client, bases, ids) = (client.clone(), bases.clone(), ids.clone());
-                    tokio::spawn(async move {
-                        let mut lat = Vec::with_capacity(per_task);
-                        for i in 0..per_task {
-                            let k = t * per_task + i;
-                            let url = format!("{}/v1/jobs/{}", bases[k % 2], ids[k % ids.len()]);
-                            let t = Instant::now();
-                            let ok = client
-                                .get(url)
-                                .bearer_auth(TOKEN)
-                                .send()
-                                .await
-                                .is_ok_and(|r| r.status().is_success());
-                            if ok {
-                                lat.push(t.elapsed().as_secs_f64() * 1e3);
-                            }
-                        }
-                        lat
-                    })
-                })
-                .collect();
-            for t in tasks {
-                lat.extend(t.await.unwrap_or_default());
-            }
-            (lat, t0.elapsed().as_secs_f64())
+    // 8 clients, each reading its share of the statuses, alternating between the two API processes.
+    let reads_started = Instant::now();
+    let per_client = STATUS_READS / 8;
+    let readers: Vec<_> = (0..8)
+        .map(|c| {
+            let (client, bases, ids) = (client.clone(), bases.clone(), ids.clone());
+            tokio::spawn(async move {
+                let mut lat = Vec::with_capacity(per_client);
+                for k in c * per_client..(c + 1) * per_client {
+                    let url = format!("{}/v1/jobs/{}", bases[k % 2], ids[k % ids.len()]);
+                    let t = Instant::now();
+                    let ok = client
+                        .get(url)
+                        .bearer_auth(TOKEN)
+                        .send()
+                        .await
+                        .is_ok_and(|r| r.status().is_success());
+                    if ok {
+                        lat.push(t.elapsed().as_secs_f64() * 1e3);
+                    }
+                }
+                (lat, reads_started.elapsed().as_secs_f64())
+            })
         })
-    };
+        .collect();
     wait_all(&client, &bases[1], &ids).await?;
     let elapsed = started.elapsed().as_secs_f64();
-    let (mut lat, read_secs) = reads.await?;
+    // The reads' rate is over the span until the last client finished.
+    let (mut lat, mut read_secs) = (Vec::with_capacity(STATUS_READS), 0f64);
+    for reader in readers {
+        let (l, secs) = reader.await?;
+        lat.extend(l);
+        read_secs = read_secs.max(secs);
+    }
     lat.sort_by(f64::total_cmp);
-    let (solve_ms,): (f64,) = sqlx::query_as(&format!(
-        "SELECT AVG(solve_ms)::float8 FROM jobs WHERE id IN ({})",
-        ids.iter().map(|i| format!("'{i}'")).collect::<Vec<_>>().join(",")
-    ))
-    .fetch_one(&mut conn)
-    .await?;
+    let (solve_ms,): (f64,) = sqlx::query_as("SELECT AVG(solve_ms)::float8 FROM jobs WHERE id = ANY($1)")
+        .bind(&ids)
+        .fetch_one(&mut conn)
+        .await?;
     drop(procs);
     drop(apis);
     Ok(Figures {

@@ -239,18 +239,6 @@ async fn open(config: Config, role: Role) -> anyhow::Result<Opened> {
             (token, Some(path))
         }
     };
-    if config.master_key_hex.is_none() {
-        let path = data_dir.join(MASTER_KEY_FILE);
-        if !path.exists() && config.database.is_none() && config.database_path().exists() {
-            anyhow::bail!(
-                "{} holds sealed data but {} is missing: restore the master key from its backup (or give \
-                 it with EYEKEY_MASTER_KEY); a new key could not open what is stored",
-                data_dir.display(),
-                path.display()
-            );
-        }
-    }
-
     if role == Role::Worker && config.master_key_hex.is_none() && !data_dir.join(MASTER_KEY_FILE).exists() {
         anyhow::bail!(
             "a worker needs the master key the API processes use: give it with EYEKEY_MASTER_KEY (or put it in \

@@ -70,7 +70,7 @@ pub async fn store_document(
     objects: &Objects,
     master: &MasterKey,
     id: &str,
-    bytes: std::sync::Arc<[u8]>,
+    bytes: axum::body::Bytes,
 ) -> std::io::Result<StoredDocument> {
     let (master, doc_id) = (master.clone(), id.to_string());
     let (sealed, data_key, content_mac) = tokio::task::spawn_blocking(move || {
@@ -207,16 +207,6 @@ pub enum OpenError {
     Open,
 }
 
-/// Reads and opens a sealed file.
-pub async fn open_file(path: &Path, key: &DataKey, aad: &[u8]) -> Result<Vec<u8>, OpenError> {
-    let sealed = match tokio::fs::read(path).await {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(OpenError::Missing),
-        Err(e) => return Err(OpenError::Io(e)),
-    };
-    key.open(&sealed, aad).map_err(|_| OpenError::Open)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,17 +224,19 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, ["d1.sealed"], "no temporary file left");
+        let objects = Objects::Dir(dir.path().to_path_buf());
         let rt = tokio::runtime::Builder::new_current_thread().build().unwrap();
         assert_eq!(
-            rt.block_on(open_file(&path, &key, &document_aad("d1"))).unwrap(),
+            rt.block_on(open_object(&objects, "d1.sealed", &key, &document_aad("d1")))
+                .unwrap(),
             b"PIN 4821 PIN 4821"
         );
         assert!(matches!(
-            rt.block_on(open_file(&path, &key, &document_aad("d2"))),
+            rt.block_on(open_object(&objects, "d1.sealed", &key, &document_aad("d2"))),
             Err(OpenError::Open)
         ));
         assert!(matches!(
-            rt.block_on(open_file(&dir.path().join("nope"), &key, b"")),
+            rt.block_on(open_object(&objects, "nope", &key, b"")),
             Err(OpenError::Missing)
         ));
     }

@@ -321,7 +321,7 @@ async fn store_new(
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
     let id = id_text(&Uuid::new_v4());
     let len = bytes.len() as i64;
-    let stored = sealed::store_document(&state.objects, &state.master_key, &id, bytes.to_vec().into())
+    let stored = sealed::store_document(&state.objects, &state.master_key, &id, bytes)
         .await
         .map_err(ApiError::from_io)?;
     let row = store::documents::insert(

@@ -94,7 +94,7 @@ pub async fn list_views(
 ) -> Result<Json<ViewList>, ApiError> {
     let job = succeeded(&state, &id).await?;
     let dir = format!("{}/views", job.bundle_path.as_deref().unwrap_or_default());
-    let mut names: Vec<String> = state
+    let names: Vec<String> = state
         .objects
         .list(&dir)
         .await
@@ -103,7 +103,6 @@ pub async fn list_views(
         .filter_map(|name| name.strip_suffix(sealed::SUFFIX).map(str::to_string))
         .filter(|name| name.ends_with(".png") && is_plain_file_name(name))
         .collect();
-    names.sort();
     Ok(Json(ViewList { names }))
 }
 

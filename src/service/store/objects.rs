@@ -119,7 +119,7 @@ impl Objects {
         }
     }
 
-    /// Names (relative to `dir`) of the objects directly in `dir`.
+    /// Names (relative to `dir`) of the objects directly in `dir`, sorted.
     pub async fn list(&self, dir: &str) -> io::Result<Vec<String>> {
         match self {
             Self::Dir(root) => {
