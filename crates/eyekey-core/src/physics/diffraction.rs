@@ -166,6 +166,24 @@ impl Cdf {
         Self { table, guide }
     }
 
+    /// The cumulative value at `x`, linearly interpolated on the table's uniform grid of x (0 before its
+    /// start, 1 past its end), so that inverting it with [`DiffractionSampler::invert`] gives x back.
+    fn at(&self, x: f64) -> f64 {
+        let table = &self.table;
+        let n = table.len() - 1;
+        let (x0, x1) = (table[0].0, table[n].0);
+        let f = (x - x0) / (x1 - x0) * n as f64;
+        if f.is_nan() || f <= 0.0 {
+            return 0.0;
+        }
+        if f >= n as f64 {
+            return 1.0;
+        }
+        let k = f as usize;
+        let (c0, c1) = (table[k].1, table[k + 1].1);
+        c0 + (c1 - c0) * (f - k as f64)
+    }
+
     /// The first index whose cumulative value is ≥ u (`table.len()` if none).
     fn first_at_least(&self, u: f64) -> usize {
         let b = ((u * GUIDE_BUCKETS as f64) as usize).min(GUIDE_BUCKETS - 1);
@@ -243,6 +261,117 @@ impl DiffractionSampler {
     /// The sinc² coordinate t = p·θ/λ whose cumulative power is `u` ∈ [0, 1).
     pub fn sinc_coordinate(&self, u: f64) -> f64 {
         Self::invert(&self.sinc, u)
+    }
+
+    /// The cumulative power of one sinc² axis at `t` (0 below −T, 1 above T).
+    pub fn sinc_cdf(&self, t: f64) -> f64 {
+        self.sinc.at(t)
+    }
+
+    /// A sinc² coordinate drawn from the distribution restricted to [lo, hi], with the power it holds:
+    /// (t, P(lo ≤ t ≤ hi)), or `None` when the interval holds none. Drawing from the restriction and weighting
+    /// by its power is importance sampling of the whole distribution over an integrand that vanishes outside
+    /// the interval (the same expectation with every draw inside it).
+    pub fn sinc_coordinate_within(&self, lo: f64, hi: f64, u: f64) -> Option<(f64, f64)> {
+        let (c_lo, c_hi) = (self.sinc_cdf(lo), self.sinc_cdf(hi));
+        let mass = c_hi - c_lo;
+        if mass <= 0.0 {
+            return None;
+        }
+        let t = Self::invert(&self.sinc, c_lo + u * mass).clamp(lo, hi);
+        Some((t, mass))
+    }
+
+    /// A diffraction angle (radians) for a square lenslet of side `p_mm` whose undiffracted ray meets the pupil
+    /// plane, `distance_mm` away, at `chief` (mm from the pupil's centre), drawn among the angles that enter the
+    /// pupil of radius `r_p`, with the power they hold: x from sinc² restricted to the pupil's extent in x, y
+    /// from sinc² restricted to the pupil's chord at that x. Weighting by the power is importance sampling of
+    /// [`Self::lenslet_angle`] times the pupil's indicator: the same expectation, every draw inside the pupil.
+    #[allow(clippy::too_many_arguments)]
+    pub fn lenslet_angle_into_pupil(
+        &self,
+        p_mm: f64,
+        wavelength_nm: f64,
+        distance_mm: f64,
+        chief: [f64; 2],
+        r_p: f64,
+        u1: f64,
+        u2: f64,
+    ) -> Option<([f64; 2], f64)> {
+        // t = p·θ/λ, and the pupil plane's point is chief + distance·θ = chief + t·(λ·distance/p).
+        let scale = wavelength_nm * 1e-6 * distance_mm / p_mm;
+        let (tx, mx) = self.sinc_coordinate_within((-r_p - chief[0]) / scale, (r_p - chief[0]) / scale, u1)?;
+        let x = chief[0] + tx * scale;
+        let half = (r_p * r_p - x * x).max(0.0).sqrt();
+        let (ty, my) = self.sinc_coordinate_within((-half - chief[1]) / scale, (half - chief[1]) / scale, u2)?;
+        let k = scale / distance_mm;
+        Some(([tx * k, ty * k], mx * my))
+    }
+
+    /// A diffraction angle (radians) for a circular hole of diameter `a_mm` whose undiffracted ray meets the
+    /// pupil plane at `chief`, drawn among the angles that enter the pupil of radius `r_p`, with the power they
+    /// hold: the Airy radius restricted to the annulus that can reach the pupil, then the azimuth restricted to
+    /// the arc of that circle inside it (law of cosines). Importance sampling of [`Self::pinhole_angle`] times
+    /// the pupil's indicator, as for lenslets.
+    #[allow(clippy::too_many_arguments)]
+    pub fn pinhole_angle_into_pupil(
+        &self,
+        a_mm: f64,
+        wavelength_nm: f64,
+        distance_mm: f64,
+        chief: [f64; 2],
+        r_p: f64,
+        u1: f64,
+        u2: f64,
+    ) -> Option<([f64; 2], f64)> {
+        // x = π·a·θ/λ; the pupil-plane offset is ρ = distance·θ = x·scale.
+        let scale = wavelength_nm * 1e-6 * distance_mm / (PI * a_mm);
+        let c = chief[0].hypot(chief[1]);
+        let (lo, hi) = ((c - r_p).max(0.0) / scale, (c + r_p) / scale);
+        let (c_lo, c_hi) = (self.airy.at(lo), self.airy.at(hi));
+        let mass = c_hi - c_lo;
+        if mass <= 0.0 {
+            return None;
+        }
+        let rho = Self::invert(&self.airy, c_lo + u1 * mass).clamp(lo, hi) * scale;
+        // |chief + ρ·(cos ψ, sin ψ)| ≤ r_p ⟺ cos(ψ − ψ_c) ≤ κ, with ψ_c the chief's direction.
+        let (psi, arc) = if rho + c <= r_p || c == 0.0 {
+            (2.0 * PI * u2, 1.0)
+        } else {
+            let kappa = (r_p * r_p - c * c - rho * rho) / (2.0 * rho * c);
+            if kappa <= -1.0 {
+                return None;
+            }
+            let half = PI - kappa.min(1.0).acos();
+            let psi_c = chief[1].atan2(chief[0]);
+            (psi_c + PI + half * (2.0 * u2 - 1.0), half / PI)
+        };
+        let theta = rho / distance_mm;
+        let (s, co) = psi.sin_cos();
+        Some(([theta * co, theta * s], mass * arc))
+    }
+
+    /// An upper bound on the power of a square lenslet's (`lenslet`) or a circular hole's pattern that enters
+    /// the pupil of radius `r_p` from a ray aimed at `chief` (mm from the pupil's centre), `distance_mm` away:
+    /// the power in the pupil's bounding square (lenslet) or in the annulus that can reach it (hole).
+    pub fn pupil_power_bound(
+        &self,
+        lenslet: bool,
+        a_mm: f64,
+        wavelength_nm: f64,
+        distance_mm: f64,
+        chief: [f64; 2],
+        r_p: f64,
+    ) -> f64 {
+        if lenslet {
+            let scale = wavelength_nm * 1e-6 * distance_mm / a_mm;
+            let axis = |c: f64| self.sinc.at((r_p - c) / scale) - self.sinc.at((-r_p - c) / scale);
+            axis(chief[0]) * axis(chief[1])
+        } else {
+            let scale = wavelength_nm * 1e-6 * distance_mm / (PI * a_mm);
+            let c = chief[0].hypot(chief[1]);
+            self.airy.at((c + r_p) / scale) - self.airy.at((c - r_p).max(0.0) / scale)
+        }
     }
 
     /// A diffraction angle (radians, x and y) for a circular hole of diameter `a_mm` at `wavelength_nm`, from
@@ -367,9 +496,116 @@ mod tests {
             .count() as f64
             / n as f64;
         assert!((central - 0.9028 / 0.9966).abs() < 3e-3, "{central}");
+        // Restricted to [0.5, 2]: the draws stay inside, the power is ∫ sinc² over it (Simpson, independent of
+        // the table), and the draws' fraction below 1 is that interval's share of it.
+        let simpson = |lo: f64, hi: f64| {
+            let m = 2000;
+            let h = (hi - lo) / m as f64;
+            let mut acc = sinc2(lo) + sinc2(hi);
+            for k in 1..m {
+                acc += if k % 2 == 1 { 4.0 } else { 2.0 } * sinc2(lo + k as f64 * h);
+            }
+            acc * h / 3.0
+        };
+        let total = simpson(-SINC_T_MAX, SINC_T_MAX);
+        let draws: Vec<(f64, f64)> = (0..n)
+            .map(|k| {
+                s.sinc_coordinate_within(0.5, 2.0, (k as f64 + 0.5) / n as f64)
+                    .expect("power inside")
+            })
+            .collect();
+        assert!(draws.iter().all(|d| (0.5..=2.0).contains(&d.0)));
+        assert!((draws[0].1 - simpson(0.5, 2.0) / total).abs() < 1e-5, "{}", draws[0].1);
+        let below = draws.iter().filter(|d| d.0 < 1.0).count() as f64 / n as f64;
+        assert!((below - simpson(0.5, 1.0) / simpson(0.5, 2.0)).abs() < 1e-3, "{below}");
+        assert!((s.sinc_cdf(0.0) - 0.5).abs() < 1e-9 && s.sinc_cdf(-40.0) == 0.0 && s.sinc_cdf(40.0) == 1.0);
+        assert!(s.sinc_coordinate_within(31.0, 40.0, 0.5).is_none());
         // An angle for a 80 µm hole at 520 nm has the radius the table gives.
         let a = s.pinhole_angle(0.08, 520.0, 0.5, 0.25);
         let r = s.airy_radius(0.5) * 520e-6 / (PI * 0.08);
         assert!((a[0].hypot(a[1]) - r).abs() < 1e-15);
+    }
+
+    /// Moments (power, mean x, mean y, mean r²) of the light entering a pupil of radius 3 mm at 500 mm from a
+    /// ray aimed at `chief`: by plain draws of the pattern with the pupil's rejection, and by the pupil-aimed
+    /// draws weighted by their power. Returns both, each as power-weighted sums / draws.
+    fn pupil_moments(pinhole: bool, chief: [f64; 2], n: usize) -> ([f64; 4], [f64; 4]) {
+        let s = DiffractionSampler::shared();
+        let (a, lambda, d, r_p) = (if pinhole { 0.15 } else { 1.0 }, 550.0, 500.0, 3.0);
+        let mut rng = crate::physics::transport::rng::SplitMix64(7);
+        let (mut plain, mut aimed) = ([0.0; 4], [0.0; 4]);
+        let add = |acc: &mut [f64; 4], theta: [f64; 2], w: f64| {
+            let (x, y) = (chief[0] + d * theta[0], chief[1] + d * theta[1]);
+            acc[0] += w;
+            acc[1] += w * x;
+            acc[2] += w * y;
+            acc[3] += w * (x * x + y * y);
+        };
+        for _ in 0..n {
+            let (u1, u2) = (rng.next_f64(), rng.next_f64());
+            let theta = if pinhole {
+                s.pinhole_angle(a, lambda, u1, u2)
+            } else {
+                s.lenslet_angle(a, lambda, u1, u2)
+            };
+            let (x, y) = (chief[0] + d * theta[0], chief[1] + d * theta[1]);
+            if x * x + y * y <= r_p * r_p {
+                add(&mut plain, theta, 1.0);
+            }
+            let (u1, u2) = (rng.next_f64(), rng.next_f64());
+            let drawn = if pinhole {
+                s.pinhole_angle_into_pupil(a, lambda, d, chief, r_p, u1, u2)
+            } else {
+                s.lenslet_angle_into_pupil(a, lambda, d, chief, r_p, u1, u2)
+            };
+            if let Some((theta, w)) = drawn {
+                let (x, y) = (chief[0] + d * theta[0], chief[1] + d * theta[1]);
+                assert!(
+                    x * x + y * y <= r_p * r_p * (1.0 + 1e-9),
+                    "an aimed draw missed the pupil: {x}, {y}"
+                );
+                add(&mut aimed, theta, w);
+            }
+        }
+        (plain.map(|v| v / n as f64), aimed.map(|v| v / n as f64))
+    }
+
+    #[test]
+    fn pupil_aimed_draws_carry_the_light_plain_draws_carry() {
+        // Chief rays inside the pupil, at its edge and outside it (where only the pattern's tail enters): the
+        // power entering and its first and second moments agree within the plain draws' sampling error.
+        for pinhole in [false, true] {
+            for chief in [[0.4, -0.2], [2.8, 1.1], [4.5, -3.0], [-7.0, 0.5]] {
+                let (plain, aimed) = pupil_moments(pinhole, chief, 400_000);
+                let p = plain[0];
+                let lenslet = !pinhole;
+                let bound = DiffractionSampler::shared().pupil_power_bound(
+                    lenslet,
+                    if pinhole { 0.15 } else { 1.0 },
+                    550.0,
+                    500.0,
+                    chief,
+                    3.0,
+                );
+                assert!(bound >= aimed[0] && bound <= 1.0, "bound {bound} < power {}", aimed[0]);
+                // Four binomial standard errors of the plain estimate of the power (where the tail enters, a
+                // few in 10⁴, that is a quarter of the power itself).
+                let tol = 4.0 * (p * (1.0 - p) / 400_000.0).sqrt();
+                assert!(
+                    (aimed[0] - p).abs() < tol,
+                    "pinhole {pinhole}, chief {chief:?}: power {} vs {p}",
+                    aimed[0]
+                );
+                for k in 1..4 {
+                    let scale = if k == 3 { 9.0 } else { 3.0 };
+                    assert!(
+                        (aimed[k] - plain[k]).abs() < scale * tol,
+                        "pinhole {pinhole}, chief {chief:?}: moment {k} {} vs {}",
+                        aimed[k],
+                        plain[k]
+                    );
+                }
+            }
+        }
     }
 }

@@ -20,7 +20,7 @@ mod csr;
 mod fft;
 mod grid;
 mod kernels;
-mod rng;
+pub(crate) mod rng;
 mod shift_invariant;
 mod stencil;
 mod trace;

@@ -41,18 +41,6 @@ struct ViewKernel {
     power: f64,
 }
 
-/// How a kernel's sub-rays find the pupil.
-#[derive(Clone, Copy, PartialEq)]
-enum Sampling {
-    /// Draw the diffraction angle from the aperture's pattern; sub-rays that miss the pupil are lost (best when
-    /// the pattern is narrower than the pupil: lenslets).
-    Angle,
-    /// Draw the pupil point uniformly and weight the sub-ray by the pattern's density at the angle that
-    /// reaches it, times the pupil's solid angle: every sub-ray counts (best when the pattern is wider than
-    /// the pupil: pinholes). The same expectation as `Angle`, importance-sampled.
-    Pupil,
-}
-
 /// Points spread evenly over the unit pupil disc (a sunflower pattern: radius √((r + ½)/N), golden-angle
 /// steps), with the landing shift per point (retinal pixels) and per derivative term: the pupil-sampled
 /// kernels use point r for their r-th sub-ray of every view and block, so the wavefront's gradient is
@@ -189,11 +177,128 @@ impl KernelBox {
     }
 }
 
+/// One angle-sampled sub-ray, as much of its trace as does not depend on the eye's aberrations: where it lands
+/// relative to its block's first retinal pixel before the wavefront moves it (retinal pixels), where it crosses
+/// the pupil plane (mm from the pupil's centre), and the power it carries.
+#[derive(Clone, Copy)]
+struct AimedRay {
+    f0: [f32; 2],
+    p: [f32; 2],
+    w: f32,
+}
+
+/// Every view's angle-sampled sub-rays for one display geometry, wavelength, eye position, seed and sampling
+/// pupil: aimed at a pupil of radius `r_s` and weighted by the power they carry there, so that the kernels of
+/// every eye at that position whose pupil is no wider are the same rays with the ones outside its own pupil
+/// dropped (an unbiased restriction) and each landing moved by its own wavefront. Tracing them is most of a
+/// kernel's cost; sharing them across the people of an evaluation is why they are held apart.
+struct RayBundle {
+    views: Vec<Vec<AimedRay>>,
+    traced: Vec<u64>,
+    /// Blocks on each side of the eye's that the rays come from.
+    nb: i64,
+}
+
+impl RayBundle {
+    fn bytes(&self) -> usize {
+        self.views
+            .iter()
+            .map(|v| v.len() * std::mem::size_of::<AimedRay>())
+            .sum::<usize>()
+            + 64
+    }
+}
+
+/// Sampling pupils come in steps of this radius (mm): an eye's rays are those of the next step up.
+const SAMPLING_PUPIL_STEP_MM: f64 = 0.25;
+
+/// How much memory the process's ray bundles may hold; the oldest go first.
+const RAY_BUNDLE_CACHE_BYTES: usize = 160 << 20;
+
+#[derive(Default)]
+struct BundleCache {
+    map: std::collections::HashMap<String, std::sync::Arc<RayBundle>>,
+    order: std::collections::VecDeque<String>,
+    bytes: usize,
+}
+
+fn bundle_cache() -> &'static std::sync::Mutex<BundleCache> {
+    static CACHE: std::sync::OnceLock<std::sync::Mutex<BundleCache>> = std::sync::OnceLock::new();
+    CACHE.get_or_init(Default::default)
+}
+
 impl Tracer<'_> {
-    /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block (taps keyed relative to the
-    /// block's first retinal pixel); with `power_only`, only the light entering the pupil is counted and no
-    /// taps are made.
-    fn view_kernel(&self, i: u32, j: u32, rays: u32, table: &PupilTable, power_only: bool) -> ViewKernel {
+    /// The sampling pupil's radius for this eye: its own, rounded up to the next step.
+    fn sampling_radius(&self) -> f64 {
+        (self.r_p / SAMPLING_PUPIL_STEP_MM - 1e-9).ceil().max(1.0) * SAMPLING_PUPIL_STEP_MM
+    }
+
+    /// The bundle of angle-sampled rays this eye's kernels are made of (traced, or the process's copy).
+    fn ray_bundle(&self, rays: u32) -> std::sync::Arc<RayBundle> {
+        let d = self.display;
+        let wave = self.options.wave.expect("a wave-optics build");
+        let r_s = self.sampling_radius();
+        let nb = wave.neighbour_blocks.max(crate::physics::observer::neighbour_blocks(
+            d,
+            wave.wavelength_nm,
+            2.0 * r_s,
+            self.eye,
+        ));
+        let key = format!(
+            "{:?} {} {} {} {} {} {} {}|{} {} {} {}|{} {} {} {}",
+            d.aperture,
+            d.hole_pitch_mm,
+            d.hole_diameter_mm,
+            d.views_u,
+            d.views_v,
+            d.screen_pixel_pitch_mm,
+            d.gap_mm,
+            d.viewing_distance_mm,
+            wave.wavelength_nm,
+            self.eye.x_mm,
+            self.eye.y_mm,
+            self.d_eye,
+            rays,
+            self.options.seed,
+            r_s,
+            self.grid.pixel_mm,
+        ) + &format!(" {nb}");
+        if let Some(b) = bundle_cache().lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
+            return b.clone();
+        }
+        let views: Vec<(u32, u32)> = (0..d.views_v)
+            .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
+            .collect();
+        let traced: Vec<(Vec<AimedRay>, u64)> = views
+            .par_iter()
+            .map(|&(i, j)| self.aimed_rays(i, j, rays, r_s, nb as i64))
+            .collect();
+        let (views, traced) = traced.into_iter().unzip();
+        let bundle = std::sync::Arc::new(RayBundle {
+            views,
+            traced,
+            nb: nb as i64,
+        });
+        let mut cache = bundle_cache().lock().unwrap_or_else(|e| e.into_inner());
+        if !cache.map.contains_key(&key) && bundle.bytes() <= RAY_BUNDLE_CACHE_BYTES {
+            cache.bytes += bundle.bytes();
+            cache.map.insert(key.clone(), bundle.clone());
+            cache.order.push_back(key);
+            while cache.bytes > RAY_BUNDLE_CACHE_BYTES {
+                let Some(old) = cache.order.pop_front() else { break };
+                if let Some(b) = cache.map.remove(&old) {
+                    cache.bytes -= b.bytes();
+                }
+            }
+        }
+        bundle
+    }
+
+    /// View (i, j)'s sub-rays, `rays` per block for the blocks whose light can reach the pupil (fewer for the
+    /// blocks whose light mostly misses it), each with a diffraction angle drawn among those that enter the
+    /// sampling pupil of radius `r_s` and weighted by the power they carry (`DiffractionSampler::*_into_pupil`);
+    /// returns them with the number traced.
+    fn aimed_rays(&self, i: u32, j: u32, rays: u32, r_s: f64, nb: i64) -> (Vec<AimedRay>, u64) {
         let d = self.display;
         let k = self.options.retina_oversample as f64;
         let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
@@ -206,41 +311,38 @@ impl Tracer<'_> {
         let sampler = self.sampler.expect("a wave-optics build");
         let per_block = d.block_shift_at_pupil_mm(self.d_eye);
         let centre = |e: f64| (-e / per_block).round() as i64;
-        let nb = wave.neighbour_blocks as i64;
         let (kx, ky) = (centre(self.eye.x_mm), centre(self.eye.y_mm));
-        let n_terms = self.term_polys.len();
-        let lambda_mm = wave.wavelength_nm * 1e-6;
-        let sampling = match d.aperture {
-            Aperture::Pinhole if 1.22 * lambda_mm * self.d_eye / a > self.r_p => Sampling::Pupil,
-            _ => Sampling::Angle,
-        };
-        // The pattern's angular density: Airy π·a²/(4λ²)·[2J₁(x)/x]², x = π·a·θ/λ (it integrates to 1 over the
-        // plane of angles); sinc² per axis, (A/λ)²·sinc²(Aθ_x/λ)·sinc²(Aθ_y/λ).
-        let density = |t: [f64; 2]| match d.aperture {
-            Aperture::Pinhole => {
-                let x = std::f64::consts::PI * a * t[0].hypot(t[1]) / lambda_mm;
-                std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm) * airy_intensity(x)
-            }
-            Aperture::Lenslet => (a / lambda_mm).powi(2) * sinc2(a * t[0] / lambda_mm) * sinc2(a * t[1] / lambda_mm),
-        };
-        let pupil_solid_angle = std::f64::consts::PI * self.r_p * self.r_p / (self.d_eye * self.d_eye);
-        let (mut traced, mut in_pupil, mut power) = (0u64, 0u64, 0f64);
-        // The box holding every landing: the window's blocks, the aperture, and the largest aberration shift
-        // (with a margin for angle-sampled pupil points between the table's).
-        let reach = 1.25 * table.max_shift + 2.0;
-        let bounds = |kc: i64| {
-            let lo = (k - 1.0) / 2.0 + (-0.5 * a - (kc + nb) as f64 * pitch) / self.grid.pixel_mm - reach;
-            let hi = (k - 1.0) / 2.0 + (0.5 * a - (kc - nb) as f64 * pitch) / self.grid.pixel_mm + reach;
-            (lo.floor() as i64, hi.ceil() as i64 + 1)
-        };
-        let mut kernel = KernelBox::new(bounds(kx), bounds(ky), n_terms);
-        let mut dfs: Vec<[f64; 2]> = vec![[0.0; 2]; n_terms];
         let view = (j * d.views_u + i) as u64;
+        // How far a sub-ray's undiffracted crossing of the pupil plane strays from its block's nominal one (the
+        // point in the aperture and in the screen pixel).
+        let stray = match d.aperture {
+            Aperture::Pinhole => 0.5 * a * (1.0 + self.d_eye / d.gap_mm),
+            Aperture::Lenslet => 0.5 * a,
+        } + 0.5 * p_s * self.d_eye / d.gap_mm;
+        let mut out = Vec::new();
+        let mut traced = 0u64;
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
                 let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                for ray in 0..rays as usize {
+                // Rays in proportion to an upper bound on the block's power in the pupil (from the stray
+                // crossing nearest the pupil's centre), at least 16: every block keeps at least as many rays in
+                // the pupil as draws of the whole pattern would have put there, and each carries its power.
+                let nominal = |m: i64, o: f64, e: f64| self.d_eye * (-(m as f64) * pitch * aim - o) / d.gap_mm - e;
+                let nearest = |c: f64| c.signum() * (c.abs() - stray).max(0.0);
+                let bound = sampler.pupil_power_bound(
+                    d.aperture == Aperture::Lenslet,
+                    a,
+                    wave.wavelength_nm,
+                    self.d_eye,
+                    [
+                        nearest(nominal(mx, off[0], self.eye.x_mm)),
+                        nearest(nominal(my, off[1], self.eye.y_mm)),
+                    ],
+                    r_s,
+                );
+                let block_rays = ((rays as f64 * bound).ceil() as u32).clamp(16.min(rays), rays);
+                for _ in 0..block_rays {
                     traced += 1;
                     let (ux, uy) = match d.aperture {
                         Aperture::Pinhole => {
@@ -267,31 +369,155 @@ impl Tracer<'_> {
                         ux + self.d_eye * num[0] / d.gap_mm - self.eye.x_mm,
                         uy + self.d_eye * num[1] / d.gap_mm - self.eye.y_mm,
                     ];
-                    let (rx, ry, ray_weight, point) = match sampling {
-                        Sampling::Angle => {
-                            let theta = match d.aperture {
-                                Aperture::Pinhole => sampler.pinhole_angle(a, wave.wavelength_nm, u1, u2),
-                                Aperture::Lenslet => sampler.lenslet_angle(a, wave.wavelength_nm, u1, u2),
-                            };
-                            let (rx, ry) = (
-                                (chief[0] + self.d_eye * theta[0]) / self.r_p,
-                                (chief[1] + self.d_eye * theta[1]) / self.r_p,
-                            );
-                            if rx * rx + ry * ry > 1.0 {
-                                continue;
-                            }
-                            (rx, ry, 1.0, None)
-                        }
-                        Sampling::Pupil => {
-                            let p = ray % table.points.len();
-                            let [rx, ry] = table.points[p];
-                            let theta = [
-                                (rx * self.r_p - chief[0]) / self.d_eye,
-                                (ry * self.r_p - chief[1]) / self.d_eye,
-                            ];
-                            (rx, ry, density(theta) * pupil_solid_angle, Some(p))
-                        }
+                    let (lambda, d_eye) = (wave.wavelength_nm, self.d_eye);
+                    let drawn = match d.aperture {
+                        Aperture::Pinhole => sampler.pinhole_angle_into_pupil(a, lambda, d_eye, chief, r_s, u1, u2),
+                        Aperture::Lenslet => sampler.lenslet_angle_into_pupil(a, lambda, d_eye, chief, r_s, u1, u2),
                     };
+                    let Some((theta, w)) = drawn else {
+                        continue;
+                    };
+                    out.push(AimedRay {
+                        f0: [
+                            ((k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm) as f32,
+                            ((k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm) as f32,
+                        ],
+                        p: [
+                            (chief[0] + self.d_eye * theta[0]) as f32,
+                            (chief[1] + self.d_eye * theta[1]) as f32,
+                        ],
+                        w: w as f32,
+                    });
+                }
+            }
+        }
+        (out, traced)
+    }
+
+    /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block (taps keyed relative to the
+    /// block's first retinal pixel), from `bundle` where the angle is sampled; with `power_only`, only the light
+    /// entering the pupil is counted and no taps are made.
+    fn view_kernel(
+        &self,
+        i: u32,
+        j: u32,
+        rays: u32,
+        table: &PupilTable,
+        bundle: Option<&RayBundle>,
+        power_only: bool,
+    ) -> ViewKernel {
+        let d = self.display;
+        let k = self.options.retina_oversample as f64;
+        let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
+        let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
+        let off = [
+            (i as f64 - (d.views_u as f64 - 1.0) / 2.0) * p_s,
+            (j as f64 - (d.views_v as f64 - 1.0) / 2.0) * p_s,
+        ];
+        let wave = self.options.wave.expect("a wave-optics build");
+        let per_block = d.block_shift_at_pupil_mm(self.d_eye);
+        let centre = |e: f64| (-e / per_block).round() as i64;
+        let nb = bundle.map_or(wave.neighbour_blocks as i64, |b| b.nb);
+        let (kx, ky) = (centre(self.eye.x_mm), centre(self.eye.y_mm));
+        let n_terms = self.term_polys.len();
+        let lambda_mm = wave.wavelength_nm * 1e-6;
+        // The pattern's angular density: Airy π·a²/(4λ²)·[2J₁(x)/x]², x = π·a·θ/λ (it integrates to 1 over the
+        // plane of angles); sinc² per axis, (A/λ)²·sinc²(Aθ_x/λ)·sinc²(Aθ_y/λ).
+        let density = |t: [f64; 2]| match d.aperture {
+            Aperture::Pinhole => {
+                let x = std::f64::consts::PI * a * t[0].hypot(t[1]) / lambda_mm;
+                std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm) * airy_intensity(x)
+            }
+            Aperture::Lenslet => (a / lambda_mm).powi(2) * sinc2(a * t[0] / lambda_mm) * sinc2(a * t[1] / lambda_mm),
+        };
+        let pupil_solid_angle = std::f64::consts::PI * self.r_p * self.r_p / (self.d_eye * self.d_eye);
+        let (mut traced, mut in_pupil, mut power) = (0u64, 0u64, 0f64);
+        // The box holding every landing: the window's blocks, the aperture, and the largest aberration shift
+        // (with a margin for angle-sampled pupil points between the table's).
+        let reach = 1.25 * table.max_shift + 2.0;
+        let bounds = |kc: i64| {
+            let lo = (k - 1.0) / 2.0 + (-0.5 * a - (kc + nb) as f64 * pitch) / self.grid.pixel_mm - reach;
+            let hi = (k - 1.0) / 2.0 + (0.5 * a - (kc - nb) as f64 * pitch) / self.grid.pixel_mm + reach;
+            (lo.floor() as i64, hi.ceil() as i64 + 1)
+        };
+        let mut kernel = KernelBox::new(bounds(kx), bounds(ky), n_terms);
+        let mut dfs: Vec<[f64; 2]> = vec![[0.0; 2]; n_terms];
+        let view = (j * d.views_u + i) as u64;
+        if let Some(bundle) = bundle {
+            // Angle-sampled: the bundle's rays that enter this eye's pupil, each moved by its wavefront (Eq. 9).
+            let v = view as usize;
+            traced = bundle.traced[v];
+            let r2 = self.r_p * self.r_p;
+            for ray in &bundle.views[v] {
+                let (px, py) = (ray.p[0] as f64, ray.p[1] as f64);
+                if px * px + py * py > r2 {
+                    continue;
+                }
+                in_pupil += 1;
+                power += ray.w as f64;
+                if power_only {
+                    continue;
+                }
+                let (rx, ry) = (px / self.r_p, py / self.r_p);
+                for (df, tp) in dfs.iter_mut().zip(&self.term_polys) {
+                    let g = tp.gradient(rx, ry);
+                    *df = [self.shift_per_grad * g[0], self.shift_per_grad * g[1]];
+                }
+                let g = self.poly.gradient(rx, ry);
+                let f = [
+                    ray.f0[0] as f64 + self.shift_per_grad * g[0],
+                    ray.f0[1] as f64 + self.shift_per_grad * g[1],
+                ];
+                kernel.splat(f, ray.w as f64, &dfs);
+            }
+            return ViewKernel {
+                taps: kernel.taps(),
+                traced,
+                in_pupil,
+                power,
+            };
+        }
+        // Pupil-sampled (a pattern wider than the pupil): uniform pupil points from the table, each weighted by
+        // the pattern's density at the angle that reaches it.
+        for my in ky - nb..=ky + nb {
+            for mx in kx - nb..=kx + nb {
+                let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
+                let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                for ray in 0..rays as usize {
+                    traced += 1;
+                    let (ux, uy) = match d.aperture {
+                        Aperture::Pinhole => {
+                            let rho = 0.5 * a * rng.next_f64().sqrt();
+                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                            (rho * cos, rho * sin)
+                        }
+                        Aperture::Lenslet => ((rng.next_f64() - 0.5) * a, (rng.next_f64() - 0.5) * a),
+                    };
+                    let jx = (rng.next_f64() - 0.5) * p_s;
+                    let jy = (rng.next_f64() - 0.5) * p_s;
+                    // Two draws the angle-sampled rays use, kept so that each ray's jitter is the same.
+                    let _ = (rng.next_f64(), rng.next_f64());
+                    // The aperture at the origin, the sample's block m blocks over: num = slope·g.
+                    let s = match d.aperture {
+                        Aperture::Pinhole => [ux, uy],
+                        Aperture::Lenslet => [0.0, 0.0],
+                    };
+                    let num = [
+                        s[0] - mx as f64 * pitch * aim - off[0] - jx,
+                        s[1] - my as f64 * pitch * aim - off[1] - jy,
+                    ];
+                    // Where the undiffracted ray meets the pupil plane, relative to the pupil's centre.
+                    let chief = [
+                        ux + self.d_eye * num[0] / d.gap_mm - self.eye.x_mm,
+                        uy + self.d_eye * num[1] / d.gap_mm - self.eye.y_mm,
+                    ];
+                    let p = ray % table.points.len();
+                    let [rx, ry] = table.points[p];
+                    let theta = [
+                        (rx * self.r_p - chief[0]) / self.d_eye,
+                        (ry * self.r_p - chief[1]) / self.d_eye,
+                    ];
+                    let ray_weight = density(theta) * pupil_solid_angle;
                     if ray_weight == 0.0 {
                         continue;
                     }
@@ -300,20 +526,8 @@ impl Tracer<'_> {
                     if power_only {
                         continue;
                     }
-                    let shift = match point {
-                        Some(p) => {
-                            dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
-                            table.shift[p]
-                        }
-                        None => {
-                            for (df, tp) in dfs.iter_mut().zip(&self.term_polys) {
-                                let g = tp.gradient(rx, ry);
-                                *df = [self.shift_per_grad * g[0], self.shift_per_grad * g[1]];
-                            }
-                            let g = self.poly.gradient(rx, ry);
-                            [self.shift_per_grad * g[0], self.shift_per_grad * g[1]]
-                        }
-                    };
+                    dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
+                    let shift = table.shift[p];
                     let f = [
                         (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm + shift[0],
                         (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm + shift[1],
@@ -328,6 +542,17 @@ impl Tracer<'_> {
             in_pupil,
             power,
         }
+    }
+
+    /// How this eye's kernels find the pupil: by drawing the diffraction angle among those that enter it (from a
+    /// shared [`RayBundle`]; best when the pattern is narrower than the pupil: lenslets, larger holes), or, when
+    /// the pattern is wider than the pupil (small holes), by drawing the pupil point uniformly and weighting the
+    /// sub-ray by the pattern's density at the angle that reaches it, times the pupil's solid angle. Both are
+    /// the same expectation, importance-sampled two ways.
+    fn samples_angle(&self) -> bool {
+        let d = self.display;
+        let lambda_mm = self.options.wave.expect("a wave-optics build").wavelength_nm * 1e-6;
+        !(d.aperture == Aperture::Pinhole && 1.22 * lambda_mm * self.d_eye / d.hole_diameter_mm > self.r_p)
     }
 
     /// Every view's kernel, each landing weighted so that a plain image is seen at its own intensity from
@@ -348,16 +573,18 @@ impl Tracer<'_> {
                 poly: self.poly.clone(),
                 ..*self
             };
+            let bundle = design.samples_angle().then(|| design.ray_bundle(rays));
             views
                 .par_iter()
-                .map(|&(i, j)| design.view_kernel(i, j, rays, &table, true).power)
+                .map(|&(i, j)| design.view_kernel(i, j, rays, &table, bundle.as_deref(), true).power)
                 .sum()
         };
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
         let weight_for = |power: f64| if power > 0.0 { k2 / power } else { 0.0 };
+        let bundle = self.samples_angle().then(|| self.ray_bundle(rays));
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&(i, j)| self.view_kernel(i, j, rays, &table, false))
+            .map(|&(i, j)| self.view_kernel(i, j, rays, &table, bundle.as_deref(), false))
             .collect();
         let power = if at_design {
             kernels.iter().map(|k| k.power).sum()
