@@ -172,10 +172,50 @@ fn groups(st: &ViewStencil, k: usize) -> Vec<Vec<Group>> {
 /// r[l] += w·s[l] over one register block; with `FMA`, fused (only where the CPU has it: `mul_add` is a
 /// library call otherwise).
 #[inline(always)]
-fn madd<const FMA: bool>(r: &mut [f32; LANES], w: f32, s: &[f32]) {
-    let s: &[f32; LANES] = s.try_into().expect("a block of LANES");
+fn madd<const FMA: bool, const B: usize>(r: &mut [f32; B], w: f32, s: &[f32]) {
+    let s: &[f32; B] = s.try_into().expect("a block of B lanes");
     for (x, v) in r.iter_mut().zip(s) {
         *x = if FMA { w.mul_add(*v, *x) } else { *x + w * v };
+    }
+}
+
+/// One group's taps on one block of B outputs of the forward product: dst[l] += Σ_j w_j·src[base − j + l],
+/// with the B outputs held in registers (B/8 of 8 lanes) while the taps are added and written back once. Left
+/// to the compiler, the forward product's loop ran one lane at a time (0.58 ms a band on `secure`, 0.40 ms
+/// this way); the adjoint's, which it vectorises, is faster as it is (0.34 ms, 0.43 ms this way).
+///
+/// # Safety
+///
+/// Only for code compiled with avx2 and fma (the `*_avx2` functions) on a CPU that has them; `dst` holds B
+/// floats and `src` every block read (base + B ≤ src.len(), base ≥ taps − 1), as the layout's padding
+/// guarantees; B ≤ 64, a
+/// multiple of 8.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn block_taps<const B: usize>(dst: &mut [f32], src: &[f32], base: usize, cells: &[usize], values: &[f32]) {
+    use std::arch::x86_64::{
+        __m256, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps,
+    };
+    debug_assert!(B % 8 == 0 && B <= 64 && dst.len() >= B);
+    let mut r: [__m256; 8] = [_mm256_setzero_ps(); 8];
+    for (q, slot) in r.iter_mut().enumerate().take(B / 8) {
+        *slot = _mm256_loadu_ps(dst.as_ptr().add(8 * q));
+    }
+    for (j, &cell) in cells.iter().enumerate() {
+        let w = values[cell];
+        if w == 0.0 {
+            continue;
+        }
+        let at = base - j;
+        debug_assert!(at + B <= src.len());
+        let wv = _mm256_set1_ps(w);
+        let p = src.as_ptr().add(at);
+        for (q, slot) in r.iter_mut().enumerate().take(B / 8) {
+            *slot = _mm256_fmadd_ps(wv, _mm256_loadu_ps(p.add(8 * q)), *slot);
+        }
+    }
+    for (q, slot) in r.iter().enumerate().take(B / 8) {
+        _mm256_storeu_ps(dst.as_mut_ptr().add(8 * q), *slot);
     }
 }
 
@@ -286,10 +326,17 @@ impl Layout {
             .map(|g| g.s0.unsigned_abs() as usize + g.cells.len())
             .max()
             .unwrap_or(0);
-        let nx_blocks = holes_x.div_ceil(LANES) * LANES;
+        // Register blocks as wide as a short row (so that a 32-hole row is not padded to 64), else LANES.
+        let lanes = match holes_x {
+            0..=16 => 16,
+            17..=32 => 32,
+            _ => LANES,
+        };
+        let nx_blocks = holes_x.div_ceil(lanes) * lanes;
         Self {
             groups,
             pad,
+            lanes,
             nx_blocks,
             row_len: 2 * pad + nx_blocks,
         }
@@ -302,19 +349,25 @@ impl Layout {
 struct Layout {
     groups: Vec<Vec<Vec<Group>>>,
     pad: usize,
+    /// Outputs per register block: 16, 32 or `LANES`.
+    lanes: usize,
     nx_blocks: usize,
     row_len: usize,
 }
 
 impl Pass<'_> {
-    /// Output row `gy` of the forward product into `acc` (phase-major: phase φ's holes at
-    /// [φ·nx_blocks, φ·nx_blocks + nx)).
-    fn forward_row(&self, gy: i64, acc: &mut [f32]) {
+    /// Output rows gy, gy + 1, … of the forward product into `acc`, k·nx_blocks values a row (phase-major:
+    /// phase φ's holes at [φ·nx_blocks, φ·nx_blocks + nx)).
+    fn forward_rows(&self, gy: i64, acc: &mut [f32]) {
         match simd() {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
-            Simd::Avx2 => unsafe { self.forward_row_avx2(gy, acc) },
-            _ => self.forward_row_with::<false>(gy, acc),
+            Simd::Avx2 => unsafe { self.forward_rows_avx2(gy, acc) },
+            _ => match self.layout.lanes {
+                16 => self.forward_rows_with::<false, 16>(gy, acc),
+                32 => self.forward_rows_with::<false, 32>(gy, acc),
+                _ => self.forward_rows_with::<false, LANES>(gy, acc),
+            },
         }
     }
 
@@ -324,55 +377,86 @@ impl Pass<'_> {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
             Simd::Avx2 => unsafe { self.adjoint_row_avx2(row, dst) },
-            _ => self.adjoint_row_with::<false>(row, dst),
+            _ => match self.layout.lanes {
+                16 => self.adjoint_row_with::<false, 16>(row, dst),
+                32 => self.adjoint_row_with::<false, 32>(row, dst),
+                _ => self.adjoint_row_with::<false, LANES>(row, dst),
+            },
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn forward_row_avx2(&self, gy: i64, acc: &mut [f32]) {
-        self.forward_row_with::<true>(gy, acc)
+    fn forward_rows_avx2(&self, gy: i64, acc: &mut [f32]) {
+        match self.layout.lanes {
+            16 => self.forward_rows_with::<true, 16>(gy, acc),
+            32 => self.forward_rows_with::<true, 32>(gy, acc),
+            _ => self.forward_rows_with::<true, LANES>(gy, acc),
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn adjoint_row_avx2(&self, row: usize, dst: &mut [f32]) {
-        self.adjoint_row_with::<true>(row, dst)
+        match self.layout.lanes {
+            16 => self.adjoint_row_with::<true, 16>(row, dst),
+            32 => self.adjoint_row_with::<true, 32>(row, dst),
+            _ => self.adjoint_row_with::<true, LANES>(row, dst),
+        }
     }
 
-    /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group: each block of 64 outputs stays in registers
-    /// while the group's taps are added.
+    /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group, for the output rows gy, gy + 1, … that `acc`
+    /// holds (k·nx_blocks values each, phase-major): view by view, so that a view's source rows stay in cache
+    /// while every row of the chunk takes their light; each block of B outputs stays in registers while a
+    /// group's taps are added.
     #[inline(always)]
-    fn forward_row_with<const FMA: bool>(&self, gy: i64, acc: &mut [f32]) {
+    fn forward_rows_with<const FMA: bool, const B: usize>(&self, gy0: i64, acc: &mut [f32]) {
         let op = self.op;
         let groups = &self.layout.groups;
         let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
         let (ny, k) = (op.holes_y, op.k as i64);
+        let out_len = op.k * nb;
         for (v, st) in op.views.iter().enumerate() {
             let values = st.values(self.term);
-            for (cy, row_groups) in groups[v].iter().enumerate() {
-                let num = gy - st.y0 - cy as i64;
-                if num < 0 {
-                    break;
-                }
-                if num % k != 0 || num / k >= ny as i64 {
+            for (r, acc) in acc.chunks_exact_mut(out_len).enumerate() {
+                // Kernel row cy adds source row y = (gy − y0 − cy)/k where that is a whole number in [0, ny):
+                // the rows cy ≡ gy − y0 (mod k), stepping k, between the last source row and the first.
+                let base = gy0 + r as i64 - st.y0;
+                if base < 0 {
                     continue;
                 }
-                let y = (num / k) as usize;
-                let src = &self.source[(v * ny + y) * row_len..(v * ny + y + 1) * row_len];
-                for g in row_groups {
-                    let base = (pad as i64 - g.s0) as usize;
-                    let dst = &mut acc[g.phase * nb..(g.phase + 1) * nb];
-                    for c in (0..nb).step_by(LANES) {
-                        let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
-                        for (j, &cell) in g.cells.iter().enumerate() {
-                            let w = values[cell];
-                            if w != 0.0 {
-                                let at = base + c - j;
-                                madd::<FMA>(&mut r, w, &src[at..at + LANES]);
+                let first = base.rem_euclid(k).max(base - (ny as i64 - 1) * k);
+                let last = base.min(groups[v].len() as i64 - 1);
+                let mut cy = first + (base - first).rem_euclid(k);
+                while cy <= last {
+                    let row_groups = &groups[v][cy as usize];
+                    let y = ((base - cy) / k) as usize;
+                    cy += k;
+                    let src = &self.source[(v * ny + y) * row_len..(v * ny + y + 1) * row_len];
+                    for g in row_groups {
+                        let base = (pad as i64 - g.s0) as usize;
+                        let dst = &mut acc[g.phase * nb..(g.phase + 1) * nb];
+                        #[cfg(target_arch = "x86_64")]
+                        if FMA {
+                            assert!(base + nb <= src.len() && base + 1 >= g.cells.len(), "a padded row");
+                            for c in (0..nb).step_by(B) {
+                                // SAFETY: `FMA` only in the avx2+fma functions; the blocks read lie within
+                                // the padded row (checked above) and `dst` holds nb ≥ c + B floats.
+                                unsafe { block_taps::<B>(&mut dst[c..], src, base + c, &g.cells, values) };
                             }
+                            continue;
                         }
-                        dst[c..c + LANES].copy_from_slice(&r);
+                        for c in (0..nb).step_by(B) {
+                            let mut r: [f32; B] = dst[c..c + B].try_into().expect("a block");
+                            for (j, &cell) in g.cells.iter().enumerate() {
+                                let w = values[cell];
+                                if w != 0.0 {
+                                    let at = base + c - j;
+                                    madd::<FMA, B>(&mut r, w, &src[at..at + B]);
+                                }
+                            }
+                            dst[c..c + B].copy_from_slice(&r);
+                        }
                     }
                 }
             }
@@ -381,7 +465,7 @@ impl Pass<'_> {
 
     /// dst[x] = Σ_groups Σ_j w_j·ỹ_φ(x + s0 + j, g_y), 64 samples at a time in registers.
     #[inline(always)]
-    fn adjoint_row_with<const FMA: bool>(&self, row: usize, dst: &mut [f32]) {
+    fn adjoint_row_with<const FMA: bool, const B: usize>(&self, row: usize, dst: &mut [f32]) {
         let op = self.op;
         let groups = &self.layout.groups;
         let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
@@ -398,16 +482,16 @@ impl Pass<'_> {
                 let at_row = (gy as usize * k + g.phase) * row_len;
                 let src = &self.source[at_row..at_row + row_len];
                 let base = (pad as i64 + g.s0) as usize;
-                for c in (0..nb).step_by(LANES) {
-                    let mut r: [f32; LANES] = dst[c..c + LANES].try_into().expect("a block");
+                for c in (0..nb).step_by(B) {
+                    let mut r: [f32; B] = dst[c..c + B].try_into().expect("a block");
                     for (j, &cell) in g.cells.iter().enumerate() {
                         let w = values[cell];
                         if w != 0.0 {
                             let at = base + c + j;
-                            madd::<FMA>(&mut r, w, &src[at..at + LANES]);
+                            madd::<FMA, B>(&mut r, w, &src[at..at + B]);
                         }
                     }
-                    dst[c..c + LANES].copy_from_slice(&r);
+                    dst[c..c + B].copy_from_slice(&r);
                 }
             }
         }
@@ -621,11 +705,10 @@ impl StencilOperator {
         out.par_chunks_mut(rows_per_task * width * 3)
             .enumerate()
             .for_each(|(chunk, rows)| {
-                let mut acc = vec![0f32; k * nx_blocks];
-                for (r, out_row) in rows.chunks_exact_mut(width * 3).enumerate() {
-                    let gy = (chunk * rows_per_task + r) as i64;
-                    acc.iter_mut().for_each(|a| *a = 0.0);
-                    pass.forward_row(gy, &mut acc);
+                let n_rows = rows.len() / (width * 3);
+                let mut acc = vec![0f32; n_rows * k * nx_blocks];
+                pass.forward_rows((chunk * rows_per_task) as i64, &mut acc);
+                for (out_row, acc) in rows.chunks_exact_mut(width * 3).zip(acc.chunks_exact(k * nx_blocks)) {
                     for (g, o) in out_row.chunks_exact_mut(3).enumerate() {
                         let value = acc[(g % k) * nx_blocks + g / k];
                         for (slot, ca) in o.iter_mut().zip(c) {
@@ -710,8 +793,9 @@ mod tests {
 
     /// Small displays with 3×2 views (geometry otherwise the paper's; only the counts matter): 5×4 holes (rows
     /// shorter than one register block) and 70×3 (rows of two blocks, the second part-filled).
-    fn displays() -> [DisplayGeometry; 2] {
-        [(5, 4), (70, 3)].map(|(holes_x, holes_y)| DisplayGeometry {
+    /// Rows of 5, 27 and 70 holes: register blocks of 16, 32 and 64 lanes (the last two blocks of them).
+    fn displays() -> [DisplayGeometry; 3] {
+        [(5, 4), (27, 3), (70, 3)].map(|(holes_x, holes_y)| DisplayGeometry {
             holes_x,
             holes_y,
             views_u: 3,
