@@ -150,10 +150,13 @@ pub struct DiffractionSampler {
 struct Cdf {
     table: Vec<(f64, f64)>,
     guide: Vec<u32>,
+    /// The table's first x and entries per unit of x (its grid is uniform in x).
+    x0: f64,
+    per_x: f64,
 }
 
 /// Buckets of the guide tables.
-const GUIDE_BUCKETS: usize = 4096;
+const GUIDE_BUCKETS: usize = 1 << 16;
 
 impl Cdf {
     fn new(table: Vec<(f64, f64)>) -> Self {
@@ -163,16 +166,23 @@ impl Cdf {
                 table.partition_point(|e| e.1 < u) as u32
             })
             .collect();
-        Self { table, guide }
+        let n = table.len() - 1;
+        let (x0, x1) = (table[0].0, table[n].0);
+        Self {
+            guide,
+            x0,
+            per_x: n as f64 / (x1 - x0),
+            table,
+        }
     }
 
     /// The cumulative value at `x`, linearly interpolated on the table's uniform grid of x (0 before its
     /// start, 1 past its end), so that inverting it with [`DiffractionSampler::invert`] gives x back.
+    #[inline]
     fn at(&self, x: f64) -> f64 {
         let table = &self.table;
         let n = table.len() - 1;
-        let (x0, x1) = (table[0].0, table[n].0);
-        let f = (x - x0) / (x1 - x0) * n as f64;
+        let f = (x - self.x0) * self.per_x;
         if f.is_nan() || f <= 0.0 {
             return 0.0;
         }
