@@ -74,7 +74,8 @@ fn sq_norm(v: &[f32]) -> f64 {
     v.par_iter().map(|x| (*x as f64) * (*x as f64)).sum()
 }
 
-/// Scratch buffers reused across evaluations (the solver calls the objective from one thread at a time).
+/// One term's scratch buffers, reused across evaluations (the solver calls the objective from one thread at a
+/// time): its retinal image and its share of the gradient.
 struct Scratch {
     image: Vec<f32>,
     field: Vec<f32>,
@@ -86,7 +87,7 @@ pub struct MultiplexObjective<'a> {
     n_unknowns: usize,
     scale: f64,
     tikhonov: f64,
-    scratch: Mutex<Scratch>,
+    scratch: Mutex<Vec<Scratch>>,
 }
 
 impl<'a> MultiplexObjective<'a> {
@@ -96,16 +97,19 @@ impl<'a> MultiplexObjective<'a> {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
-        let n_pixels = terms.iter().map(|t| t.observer.n_pixels()).max().unwrap_or(0);
+        let scratch = terms
+            .iter()
+            .map(|t| Scratch {
+                image: vec![0f32; t.observer.n_pixels() * 3],
+                field: vec![0f32; n_unknowns],
+            })
+            .collect();
         Self {
             terms,
             n_unknowns,
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
-            scratch: Mutex::new(Scratch {
-                image: vec![0f32; n_pixels * 3],
-                field: vec![0f32; n_unknowns],
-            }),
+            scratch: Mutex::new(scratch),
         }
     }
 
@@ -131,42 +135,61 @@ impl Objective for MultiplexObjective<'_> {
     }
 
     fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
-        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let Scratch { image, field } = &mut *guard;
-        let mut f = 0.0;
-        let mu = self.tikhonov as f32;
-        grad.par_iter_mut()
-            .zip(l.par_iter())
-            .for_each(|(g, x)| *g = 2.0 * mu * x);
-        f += self.tikhonov * sq_norm(l);
-        for t in &self.terms {
-            let o = t.observer;
-            let img = &mut image[..o.n_pixels() * 3];
-            o.forward_lms(l, img);
-            f += self.scale * t.value_and_gradient_image(img);
-            o.adjoint_lms(img, field);
-            let c = self.scale as f32;
-            grad.par_iter_mut().zip(field.par_iter()).for_each(|(g, v)| *g += c * v);
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        // The terms run side by side (each product is itself parallel, and an idle thread takes over part of
+        // another term's), then their fields are summed in the terms' order, as one term after another would.
+        let values: Vec<f64> = self
+            .terms
+            .par_iter()
+            .zip(scratch.par_iter_mut())
+            .map(|(t, Scratch { image, field })| {
+                t.observer.forward_lms(l, image);
+                let f = t.value_and_gradient_image(image);
+                t.observer.adjoint_lms(image, field);
+                f
+            })
+            .collect();
+        let mut f = self.tikhonov * sq_norm(l);
+        for v in values {
+            f += self.scale * v;
         }
+        self.combine(l, &scratch, grad);
         f
     }
 
     fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
-        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let Scratch { image, field } = &mut *guard;
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        self.terms
+            .par_iter()
+            .zip(scratch.par_iter_mut())
+            .for_each(|(t, Scratch { image, field })| {
+                t.observer.forward_lms(v, image);
+                t.curvature_image(image);
+                t.observer.adjoint_lms(image, field);
+            });
+        self.combine(v, &scratch, out);
+    }
+}
+
+impl MultiplexObjective<'_> {
+    /// `out` = 2μ·x + Σ_k scale·field_k, the terms added in order.
+    fn combine(&self, x: &[f32], scratch: &[Scratch], out: &mut [f32]) {
         let mu = self.tikhonov as f32;
-        out.par_iter_mut()
-            .zip(v.par_iter())
-            .for_each(|(o, x)| *o = 2.0 * mu * x);
-        for t in &self.terms {
-            let o = t.observer;
-            let img = &mut image[..o.n_pixels() * 3];
-            o.forward_lms(v, img);
-            t.curvature_image(img);
-            o.adjoint_lms(img, field);
-            let c = self.scale as f32;
-            out.par_iter_mut().zip(field.par_iter()).for_each(|(o, x)| *o += c * x);
-        }
+        let c = self.scale as f32;
+        const CHUNK: usize = 4096;
+        out.par_chunks_mut(CHUNK)
+            .zip(x.par_chunks(CHUNK))
+            .enumerate()
+            .for_each(|(n, (o, x))| {
+                for (o, x) in o.iter_mut().zip(x) {
+                    *o = 2.0 * mu * x;
+                }
+                for s in scratch {
+                    for (o, v) in o.iter_mut().zip(&s.field[n * CHUNK..]) {
+                        *o += c * v;
+                    }
+                }
+            });
     }
 }
 

@@ -439,6 +439,26 @@ mod tests {
     use crate::physics::zernike::ZernikeCoefficients;
     use rand::{Rng, SeedableRng};
 
+    #[test]
+    fn the_fast_floor_is_the_floor() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let special = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            -0.5,
+            1e-300,
+            -1e-300,
+            2.0_f64.powi(52) + 0.5,
+            -7.999999999,
+        ];
+        for x in special.into_iter().chain((0..10_000).map(|_| rng.gen_range(-1e6..1e6))) {
+            assert_eq!(trace::floor(x), x.floor(), "{x}");
+        }
+    }
+
     fn tiny() -> DisplayGeometry {
         DisplayGeometry {
             aperture: Default::default(),

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::rng::SplitMix64;
 use super::stencil::{StencilOperator, ViewStencil};
-use super::trace::{bilinear, Tracer};
+use super::trace::{bilinear, floor, Tracer};
 use crate::physics::diffraction::{airy_intensity, sinc2};
 use crate::physics::display::Aperture;
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
@@ -122,7 +122,7 @@ impl KernelBox {
 
     /// Splats a landing at `f` (offset pixels) of weight `weight` with landing derivatives `df` (per term).
     fn splat(&mut self, f: [f64; 2], weight: f64, df: &[[f64; 2]]) {
-        let (fx, fy) = (f[0].floor() as i64, f[1].floor() as i64);
+        let (fx, fy) = (floor(f[0]) as i64, floor(f[1]) as i64);
         for corner in 0..4u8 {
             let (dx, dy) = (fx + (corner & 1) as i64, fy + (corner >> 1) as i64);
             let (w, dwdf) = bilinear(f, corner);

@@ -686,14 +686,20 @@ impl StencilOperator {
         // Band `band` of the light field as one padded row per (view, y).
         let mut source = vec![0f32; self.n_views() * ny * row_len];
         let frame_w = nx * nu;
-        source.par_chunks_mut(row_len).enumerate().for_each(|(r, row)| {
-            let (v, y) = (r / ny, r % ny);
-            let (i, j) = (v % nu, v / nu);
-            let frame_row = (y * self.views_v + j) * frame_w;
-            for (x, slot) in row[pad..pad + nx].iter_mut().enumerate() {
-                *slot = l[(frame_row + x * nu + i) * n_bands + band];
-            }
-        });
+        // One task per view row j (its U views' rows are contiguous in `source`); each frame row is read in order.
+        source
+            .par_chunks_mut(nu * ny * row_len)
+            .enumerate()
+            .for_each(|(j, rows)| {
+                for y in 0..ny {
+                    let frame = &l[(y * self.views_v + j) * frame_w * n_bands..][..frame_w * n_bands];
+                    for x in 0..nx {
+                        for i in 0..nu {
+                            rows[(i * ny + y) * row_len + pad + x] = frame[(x * nu + i) * n_bands + band];
+                        }
+                    }
+                }
+            });
         let pass = Pass {
             op: self,
             term,
@@ -775,13 +781,18 @@ pub(crate) fn scatter_views(
     band: usize,
 ) {
     let frame_w = nx * nu;
+    // Each frame row reads its views' plane rows whole, one view at a time: reading the views in the frame's
+    // order instead would step through `ny·stride` floats between neighbours, often a multiple of 4 KiB, and
+    // the views' streams would evict one another from the same cache sets.
     out.par_chunks_mut(frame_w * n_bands)
         .enumerate()
         .for_each(|(row, dst)| {
             let (yy, j) = (row / nv, row % nv);
-            for col in 0..frame_w {
-                let (x, i) = (col / nu, col % nu);
-                dst[col * n_bands + band] = planes[((j * nu + i) * ny + yy) * stride + x];
+            for i in 0..nu {
+                let src = &planes[((j * nu + i) * ny + yy) * stride..][..nx];
+                for (x, v) in src.iter().enumerate() {
+                    dst[(x * nu + i) * n_bands + band] = *v;
+                }
             }
         });
 }
