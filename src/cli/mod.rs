@@ -127,6 +127,19 @@ pub enum ExperimentCommand {
         /// People sampled at every position.
         #[arg(long, default_value_t = 6)]
         people: u32,
+        /// Offsets from the target's pupil at its viewing distance, mm, each looked at to the right, left,
+        /// above and below (`--lateral` alone: none).
+        #[arg(long, num_args = 0.., value_delimiter = ',', default_values_t = vec![10.0, 20.0, 50.0, 100.0, 200.0, 500.0])]
+        lateral: Vec<f64>,
+        /// Other viewing distances, mm from the barrier, nearer and farther than the target (empty: none).
+        #[arg(long, num_args = 0.., value_delimiter = ',')]
+        distances: Vec<f64>,
+        /// Offsets to the right looked at at each of `--distances`, mm.
+        #[arg(long, value_delimiter = ',', default_values_t = vec![0.0, 50.0, 200.0])]
+        lateral_at_distance: Vec<f64>,
+        /// Camera apertures tried at every position, mm (`--camera-apertures` alone: no camera).
+        #[arg(long, num_args = 0.., value_delimiter = ',', default_values_t = vec![2.0, 4.0, 8.0])]
+        camera_apertures: Vec<f64>,
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
@@ -146,6 +159,10 @@ pub enum ExperimentCommand {
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
+        /// Only the rows whose label contains this text, or one of several separated by `|` (the table is then
+        /// written to `headbox-only.md`).
+        #[arg(long)]
+        only: Option<String>,
     },
     /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
     /// the share of held-out people and of camera settings at the target's position that read.
@@ -180,6 +197,15 @@ pub enum ExperimentCommand {
         /// The decoys look through the target's pupil (`decoys_at_target_pupil`).
         #[arg(long)]
         decoys_at_target_pupil: bool,
+        /// Instead of the default: population decoys.
+        #[arg(long)]
+        decoys: Option<u32>,
+        /// Instead of the default: the decoys' weight.
+        #[arg(long)]
+        decoy_weight: Option<f64>,
+        /// Instead of the default: the decoys' leak penalty weight.
+        #[arg(long)]
+        leak_weight: Option<f64>,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -552,22 +578,35 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Experiment(ExperimentCommand::Bystanders {
             out,
             people,
+            lateral,
+            distances,
+            lateral_at_distance,
+            camera_apertures,
             max_iterations,
             only,
         }) => {
+            let bystanders = eyekey_core::evaluation::BystanderOptions {
+                lateral_mm: lateral,
+                distances_mm: distances,
+                lateral_at_distance_mm: lateral_at_distance,
+                people,
+                camera_apertures_mm: camera_apertures,
+                ..Default::default()
+            };
             print!(
                 "{}",
-                crate::research::bystanders::run(&out, people, max_iterations, only.as_deref())?
+                crate::research::bystanders::run(&out, bystanders, max_iterations, only.as_deref())?
             );
         }
         Command::Experiment(ExperimentCommand::Headbox {
             out,
             population,
             max_iterations,
+            only,
         }) => {
             print!(
                 "{}",
-                crate::research::bystanders::headbox(&out, population, max_iterations)?
+                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref())?
             );
         }
         Command::Experiment(ExperimentCommand::Encoders {
@@ -587,10 +626,21 @@ pub fn run(cli: Cli) -> Result<()> {
             population,
             preset,
             decoys_at_target_pupil,
+            decoys,
+            decoy_weight,
+            leak_weight,
         }) => {
+            let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
+            let options = eyekey_core::encoding::pipeline::EncodeOptions {
+                decoys_at_target_pupil,
+                population_decoys: decoys.unwrap_or(d.population_decoys),
+                decoy_weight: decoy_weight.unwrap_or(d.decoy_weight),
+                leak_weight: leak_weight.unwrap_or(d.leak_weight),
+                ..d
+            };
             print!(
                 "{}",
-                crate::research::defaults::run(&out, targets, population, &preset, decoys_at_target_pupil)?
+                crate::research::defaults::run(&out, targets, population, &preset, options)?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {

@@ -182,7 +182,13 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
 
 /// Runs the bystander experiment with `people` sampled people per position; writes `out/bystanders.md`,
 /// `out/bystanders.json` and each encoding's pictures; returns the Markdown.
-pub fn run(out: &Path, people: u32, max_iterations: u32, only: Option<&str>) -> Result<String> {
+pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: Option<&str>) -> Result<String> {
+    bystanders.validate().map_err(|e| anyhow::anyhow!("bystanders: {e}"))?;
+    if bystanders.lateral_mm.is_empty()
+        && (bystanders.distances_mm.is_empty() || bystanders.lateral_at_distance_mm.is_empty())
+    {
+        anyhow::bail!("bystanders: no position to look from (give --lateral or --distances)");
+    }
     std::fs::create_dir_all(out)?;
     let base = Baseline::new()?;
     let encodings = [
@@ -257,16 +263,9 @@ pub fn run(out: &Path, people: u32, max_iterations: u32, only: Option<&str>) -> 
             sub_rays: 12,
             key_directions: 0,
             head_offsets_mm: vec![],
-            camera_focus_d: BystanderOptions::default().camera_focus_d,
-            camera_apertures_mm: BystanderOptions::default().camera_apertures_mm,
-            // At the design distance only: nearer and farther eyes need the traced operator, whose cost grows
-            // with the blocks around each aperture (a camera at 300 mm, 8 mm aperture: 7×7 blocks, about 2·10⁸
-            // sub-rays per band), more than a minute per viewer here; see docs/experiments.md.
-            bystanders: Some(BystanderOptions {
-                people,
-                distances_mm: vec![],
-                ..Default::default()
-            }),
+            camera_focus_d: bystanders.camera_focus_d.clone(),
+            camera_apertures_mm: bystanders.camera_apertures_mm.clone(),
+            bystanders: Some(bystanders.clone()),
             ..Default::default()
         };
         let t = Instant::now();
@@ -369,7 +368,7 @@ pub(super) fn head_rings(
 /// and encodings with the target stacked at 4 positions on a ring (2.5 mm, 5 mm); the target's readings over
 /// ±5 mm and the fraction of `population` people at the design position who read each. Writes
 /// `out/headbox.md`.
-pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<String> {
+pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&str>) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let base = Baseline::new()?;
     let (display, target, document, text, cache) =
@@ -441,7 +440,28 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
             HeadBoxMethod::Tracked,
             3.0,
         ),
+        (
+            "with the leak penalty (weight 3), target stacked on a 0.15 mm ring, re-indexed for the tracked eye",
+            0.15,
+            HeadBoxMethod::Tracked,
+            3.0,
+        ),
+        (
+            "with the leak penalty (weight 5), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            5.0,
+        ),
+        (
+            "with the leak penalty (weight 8), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            8.0,
+        ),
     ] {
+        if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
+            continue;
+        }
         let encoding = Encoding {
             label,
             decoys: 6,
@@ -474,6 +494,13 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32) -> Result<Strin
         )?;
         eprintln!("{label}: {}", md.lines().last().unwrap_or(""));
     }
-    std::fs::write(out.join("headbox.md"), &md)?;
+    std::fs::write(
+        out.join(if only.is_some() {
+            "headbox-only.md"
+        } else {
+            "headbox.md"
+        }),
+        &md,
+    )?;
     Ok(md)
 }

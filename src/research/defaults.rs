@@ -20,10 +20,11 @@ use eyekey_core::physics::display::{DisplayGeometry, PRESETS};
 use eyekey_core::physics::population::sample_population;
 use eyekey_core::physics::transport::TransportCache;
 
-/// Runs `targets` held-out targets on every preset (or those named in `only`), each judged with `population`
-/// held-out people; with `decoys_at_target_pupil` the decoys look through the target's pupil. Writes
-/// `out/defaults.md`; returns it.
-pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at_target_pupil: bool) -> Result<String> {
+/// Runs `targets` held-out targets on every preset (or those named in `only`), each encoded with `options` (the
+/// defaults, or variants of them) and judged with `population` held-out people. Writes `out/defaults.md`;
+/// returns it.
+pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: EncodeOptions) -> Result<String> {
+    options.validate().map_err(|e| anyhow::anyhow!("encode options: {e}"))?;
     std::fs::create_dir_all(out)?;
     let mut md = table_header(&[
         "preset",
@@ -46,10 +47,6 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], decoys_at
         }
         let display = DisplayGeometry::preset(name)?;
         let cache = TransportCache::default();
-        let options = EncodeOptions {
-            decoys_at_target_pupil,
-            ..Default::default()
-        };
         for (k, digits) in pins.into_iter().enumerate() {
             let target = sample_population(1, 0xD0C5_0000 + k as u64, Default::default()).remove(0);
             let (document, text) = pin_slip_of(display.holes_x * 4, display.holes_y * 4, &digits);
