@@ -206,6 +206,9 @@ pub enum ExperimentCommand {
         /// Instead of the default: the decoys' leak penalty weight.
         #[arg(long)]
         leak_weight: Option<f64>,
+        /// Instead of the default: decoys whose pupils bracket the target's (`near_pupil_decoys`).
+        #[arg(long)]
+        near_pupil_decoys: Option<u32>,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -289,6 +292,10 @@ pub struct EncodeArgs {
     /// Decoy observers sampled from the population.
     #[arg(long)]
     pub population_decoys: Option<u32>,
+    /// Further decoys whose pupils bracket the target's (0.3 mm narrower to 0.7 mm wider; for small-pupil
+    /// targets, docs/experiments.md §2e).
+    #[arg(long)]
+    pub near_pupil_decoys: Option<u32>,
     /// Weight of each decoy observer relative to the target.
     #[arg(long)]
     pub decoy_weight: Option<f64>,
@@ -629,6 +636,7 @@ pub fn run(cli: Cli) -> Result<()> {
             decoys,
             decoy_weight,
             leak_weight,
+            near_pupil_decoys,
         }) => {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
@@ -636,6 +644,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 population_decoys: decoys.unwrap_or(d.population_decoys),
                 decoy_weight: decoy_weight.unwrap_or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),
+                near_pupil_decoys: near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
                 ..d
             };
             print!(
@@ -782,6 +791,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         optics: a.optics,
         ablation: a.ablation,
         population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
+        near_pupil_decoys: a.near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
         decoy: match (a.decoy_kind, &decoy) {
             (Some(kind), _) => kind,
             (None, Some(_)) => DecoyKind::Image,

@@ -248,6 +248,22 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 1.0,
             cameras: true,
         },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring (the head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 12.0,
+            cameras: false,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 12.0,
+            cameras: true,
+        },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
@@ -395,68 +411,106 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         "their evaluation",
         "target at 0 / 1 / 2 / 3 / 4 / 5 mm: worst legibility (ring positions read by the known-font attacker, of 4)",
     ]);
-    for (label, head_radius_mm, method, leak_weight) in [
+    for (label, head_radius_mm, method, leak_weight, cameras) in [
         (
             "encoded for the design position, shown fixed",
             0.0,
             HeadBoxMethod::Fixed,
             0.0,
+            false,
         ),
         (
             "the same frames re-indexed for the tracked eye",
             0.0,
             HeadBoxMethod::Tracked,
             0.0,
+            false,
         ),
-        ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed, 0.0),
-        ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed, 0.0),
+        ("target stacked on a 2.5 mm ring", 2.5, HeadBoxMethod::Fixed, 0.0, false),
+        ("target stacked on a 5 mm ring", 5.0, HeadBoxMethod::Fixed, 0.0, false),
         (
             "target stacked on a 5 mm ring, re-indexed for the tracked eye",
             5.0,
             HeadBoxMethod::Tracked,
             0.0,
+            false,
         ),
         (
             "with the leak penalty (weight 3, the default), shown fixed",
             0.0,
             HeadBoxMethod::Fixed,
             3.0,
+            false,
         ),
         (
             "with the leak penalty (weight 3), re-indexed for the tracked eye",
             0.0,
             HeadBoxMethod::Tracked,
             3.0,
+            false,
         ),
         (
             "with the leak penalty (weight 3), target stacked on a 0.3 mm ring, shown fixed",
             0.3,
             HeadBoxMethod::Fixed,
             3.0,
+            false,
         ),
         (
             "with the leak penalty (weight 3), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
             0.3,
             HeadBoxMethod::Tracked,
             3.0,
+            false,
         ),
         (
             "with the leak penalty (weight 3), target stacked on a 0.15 mm ring, re-indexed for the tracked eye",
             0.15,
             HeadBoxMethod::Tracked,
             3.0,
+            false,
         ),
         (
             "with the leak penalty (weight 5), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
             0.3,
             HeadBoxMethod::Tracked,
             5.0,
+            false,
         ),
         (
             "with the leak penalty (weight 8), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
             0.3,
             HeadBoxMethod::Tracked,
             8.0,
+            false,
+        ),
+        (
+            "with the leak penalty (weight 8), re-indexed for the tracked eye",
+            0.0,
+            HeadBoxMethod::Tracked,
+            8.0,
+            false,
+        ),
+        (
+            "with the leak penalty (weight 12), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            12.0,
+            false,
+        ),
+        (
+            "with the leak penalty (weight 20), target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            20.0,
+            false,
+        ),
+        (
+            "with the leak penalty (weight 12), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            12.0,
+            true,
         ),
     ] {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
@@ -468,7 +522,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             decoy_weight: 0.3,
             head_radius_mm,
             leak_weight,
-            cameras: false,
+            cameras,
         };
         let (l, t_encode) = base.encode(&encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(

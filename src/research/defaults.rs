@@ -34,6 +34,7 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: 
         "decoy weights scaled by",
         "target: legibility, known font",
         "held-out people who read",
+        "their pupils",
     ]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xD0C5);
     for &name in PRESETS {
@@ -65,6 +66,10 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: 
             let t = Instant::now();
             let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
             let t_encode = t.elapsed().as_secs_f64();
+            let eval_options = EvaluationOptions {
+                optics: options.optics,
+                ..EvaluationOptions::population_only(population, Some(text))
+            };
             let ev = evaluate(
                 &display,
                 &enc.light_field,
@@ -72,10 +77,7 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: 
                 OBJECTIVE_LEVEL,
                 &target,
                 &[],
-                &EvaluationOptions {
-                    optics: options.optics,
-                    ..EvaluationOptions::population_only(population, Some(text))
-                },
+                &eval_options,
                 &cache,
                 &|_| {},
                 &AtomicBool::new(false),
@@ -83,9 +85,27 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: 
             let r = &ev.report;
             let kf = super::known_font_cell(&r.target);
             let p = r.population.as_ref().expect("a population was asked for");
+            // The readers' pupils: the evaluation's people, drawn again with its seed.
+            let people = sample_population(population as usize, eval_options.seed, Default::default());
+            let mut pupils: Vec<f64> = p
+                .people
+                .iter()
+                .filter(|s| s.readable)
+                .filter_map(|s| s.label.strip_prefix("person_")?.parse::<usize>().ok())
+                .filter_map(|k| Some(people.get(k)?.pupil_diameter_mm))
+                .collect();
+            pupils.sort_by(f64::total_cmp);
+            let smaller = pupils.iter().filter(|&&q| q <= target.pupil_diameter_mm).count();
+            let readers = match (pupils.first(), pupils.last()) {
+                (Some(lo), Some(hi)) => format!(
+                    "{lo:.1}–{hi:.1} mm, median {:.1}; {smaller} at most the target's",
+                    pupils[pupils.len() / 2]
+                ),
+                _ => "–".into(),
+            };
             writeln!(
                 md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} | {:.2}, {kf}{} | {} of {} |",
+                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} | {:.2}, {kf}{} | {} of {} | {readers} |",
                 target.pupil_diameter_mm,
                 enc.solver.decoy_weight_scale,
                 r.target.legibility,

@@ -62,7 +62,12 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
         0
     };
     let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round);
-    target + u64::from(options.population_decoys) + cameras + adaptive + extra_observers as u64
+    target
+        + u64::from(options.population_decoys)
+        + u64::from(options.near_pupil_decoys)
+        + cameras
+        + adaptive
+        + extra_observers as u64
 }
 
 /// The estimated cost of a job on `display` with `options` and `extra_observers` representative observers

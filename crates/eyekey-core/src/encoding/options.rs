@@ -69,6 +69,11 @@ pub struct EncodeOptions {
     /// target's is given the target's (their wavefront rescaled to it, ANSI Z80.28 Annex B), so the decoys
     /// compete for exactly the views the target sees.
     pub decoys_at_target_pupil: bool,
+    /// Further decoys whose pupils bracket the target's, evenly from 0.3 mm narrower to 0.7 mm wider (sampled
+    /// people of at least that pupil, their wavefronts rescaled to it, ISO 24157 Annex B). The people who read
+    /// a small-pupil target's frames are those whose pupils are near its own (docs/experiments.md §2e).
+    #[cfg_attr(feature = "openapi", schema(maximum = 16))]
+    pub near_pupil_decoys: u32,
     /// What decoy observers see.
     pub decoy: DecoyKind,
     /// Weight of each decoy observer's term relative to the target's (1.0).
@@ -148,6 +153,7 @@ impl Default for EncodeOptions {
             ablation: None,
             population_decoys: 6,
             decoys_at_target_pupil: false,
+            near_pupil_decoys: 0,
             decoy: DecoyKind::Noise,
             decoy_weight: 0.3,
             leak_weight: 3.0,
@@ -187,6 +193,12 @@ impl EncodeOptions {
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
             return bad("tolerance", format!("must be within (0, 1), got {}", self.tolerance));
+        }
+        if self.near_pupil_decoys > 16 {
+            return bad(
+                "near_pupil_decoys",
+                format!("at most 16, got {}", self.near_pupil_decoys),
+            );
         }
         if self.population_decoys > 64 {
             return bad(

@@ -280,6 +280,11 @@ impl Cast {
             }
         }
         people.extend(sampled);
+        people.extend(near_pupil_decoys(
+            spec.target.pupil_diameter_mm,
+            o.near_pupil_decoys,
+            o.seed.wrapping_add(2),
+        )?);
         for (k, p) in people.iter().enumerate() {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
@@ -354,6 +359,39 @@ impl Cast {
 
 /// `person` looking through a pupil no larger than `pupil_mm`: a larger pupil is stopped down to it, the
 /// wavefront rescaled (ANSI Z80.28 Annex B, `ZernikeCoefficients::rescaled`).
+/// `n` decoys whose pupils bracket the target's `pupil_mm`, evenly from 0.3 mm narrower to 0.7 mm wider (one:
+/// 0.2 mm wider): for each, the first of a sampled pool whose pupil is at least that wide (else the widest),
+/// given that pupil by [`at_pupil`].
+pub fn near_pupil_decoys(pupil_mm: f64, n: u32, seed: u64) -> Result<Vec<VisionProfile>, PipelineError> {
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    let pool = sample_population(256, seed, Default::default());
+    let mut next = 0;
+    (0..n)
+        .map(|i| {
+            let offset = if n == 1 {
+                0.2
+            } else {
+                -0.3 + f64::from(i) / f64::from(n - 1)
+            };
+            let want = (pupil_mm + offset).max(1.0);
+            let found = pool[next..].iter().position(|p| p.pupil_diameter_mm >= want);
+            let person = match found {
+                Some(k) => {
+                    next += k + 1;
+                    &pool[next - 1]
+                }
+                None => pool
+                    .iter()
+                    .max_by(|a, b| a.pupil_diameter_mm.total_cmp(&b.pupil_diameter_mm))
+                    .expect("a pool of 256"),
+            };
+            at_pupil(person, want)
+        })
+        .collect()
+}
+
 fn at_pupil(person: &VisionProfile, pupil_mm: f64) -> Result<VisionProfile, PipelineError> {
     if person.pupil_diameter_mm <= pupil_mm {
         return Ok(person.clone());
@@ -727,6 +765,37 @@ pub fn evaluation_files(evaluation: &crate::evaluation::Evaluation) -> std::io::
 mod tests {
     use super::*;
     use crate::evaluation::DocumentText;
+
+    #[test]
+    fn near_pupil_decoys_bracket_the_target_pupil_with_rescaled_wavefronts() {
+        assert!(near_pupil_decoys(4.3, 0, 1).unwrap().is_empty());
+        assert!((near_pupil_decoys(4.3, 1, 1).unwrap()[0].pupil_diameter_mm - 4.5).abs() < 1e-12);
+        let decoys = near_pupil_decoys(4.3, 6, 7).unwrap();
+        let pupils: Vec<f64> = decoys.iter().map(|p| p.pupil_diameter_mm).collect();
+        for (got, want) in pupils.iter().zip([4.0, 4.2, 4.4, 4.6, 4.8, 5.0]) {
+            assert!((got - want).abs() < 1e-12, "{pupils:?}");
+        }
+        // Each is a distinct sampled person, its wavefront rescaled from its own pupil: over a narrower pupil
+        // the defocus term shrinks as (r'/r)² (plus what the higher terms feed into it), so it is not a copy.
+        let pool = sample_population(256, 7, Default::default());
+        for d in &decoys {
+            let source = pool
+                .iter()
+                .find(|p| {
+                    let z =
+                        crate::physics::zernike::ZernikeCoefficients::new(p.pupil_diameter_mm, p.zernike_um.clone())
+                            .unwrap();
+                    p.pupil_diameter_mm >= d.pupil_diameter_mm
+                        && z.rescaled(d.pupil_diameter_mm).unwrap().coefficients_um == d.zernike_um
+                })
+                .expect("every decoy is a pool person rescaled");
+            assert_ne!(source.zernike_um, d.zernike_um);
+        }
+        // A pupil wider than anyone's in the pool: the widest person, as they are.
+        let wide = near_pupil_decoys(9.0, 2, 7).unwrap();
+        let widest = pool.iter().map(|p| p.pupil_diameter_mm).fold(0.0, f64::max);
+        assert!(wide.iter().all(|p| p.pupil_diameter_mm == widest));
+    }
 
     fn pin_job(hint: DocumentText) -> JobSpec {
         let display = DisplayGeometry {
