@@ -264,6 +264,14 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 12.0,
             cameras: true,
         },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 20, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 20.0,
+            cameras: true,
+        },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
@@ -510,6 +518,13 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             0.3,
             HeadBoxMethod::Tracked,
             12.0,
+            true,
+        ),
+        (
+            "with the leak penalty (weight 20), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            20.0,
             true,
         ),
     ] {
