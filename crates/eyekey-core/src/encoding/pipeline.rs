@@ -367,7 +367,12 @@ pub fn near_pupil_decoys(pupil_mm: f64, n: u32, seed: u64) -> Result<Vec<VisionP
         return Ok(Vec::new());
     }
     let pool = sample_population(256, seed, Default::default());
-    let mut next = 0;
+    let widest = pool
+        .iter()
+        .max_by(|a, b| a.pupil_diameter_mm.total_cmp(&b.pupil_diameter_mm))
+        .expect("a pool of 256");
+    // The wanted pupils rise, so each search goes on from where the last one stopped.
+    let mut rest = pool.iter();
     (0..n)
         .map(|i| {
             let offset = if n == 1 {
@@ -376,18 +381,7 @@ pub fn near_pupil_decoys(pupil_mm: f64, n: u32, seed: u64) -> Result<Vec<VisionP
                 -0.3 + f64::from(i) / f64::from(n - 1)
             };
             let want = (pupil_mm + offset).max(1.0);
-            let found = pool[next..].iter().position(|p| p.pupil_diameter_mm >= want);
-            let person = match found {
-                Some(k) => {
-                    next += k + 1;
-                    &pool[next - 1]
-                }
-                None => pool
-                    .iter()
-                    .max_by(|a, b| a.pupil_diameter_mm.total_cmp(&b.pupil_diameter_mm))
-                    .expect("a pool of 256"),
-            };
-            at_pupil(person, want)
+            at_pupil(rest.find(|p| p.pupil_diameter_mm >= want).unwrap_or(widest), want)
         })
         .collect()
 }

@@ -283,13 +283,34 @@ impl DiffractionSampler {
     /// by its power is importance sampling of the whole distribution over an integrand that vanishes outside
     /// the interval (the same expectation with every draw inside it).
     pub fn sinc_coordinate_within(&self, lo: f64, hi: f64, u: f64) -> Option<(f64, f64)> {
-        let (c_lo, c_hi) = (self.sinc_cdf(lo), self.sinc_cdf(hi));
-        let mass = c_hi - c_lo;
+        Self::draw_within(&self.sinc, lo, hi, u)
+    }
+
+    /// A coordinate drawn from `cdf`'s distribution restricted to [lo, hi], with the power it holds (see
+    /// [`Self::sinc_coordinate_within`]).
+    fn draw_within(cdf: &Cdf, lo: f64, hi: f64, u: f64) -> Option<(f64, f64)> {
+        let (c_lo, mass) = (cdf.at(lo), cdf.at(hi) - cdf.at(lo));
         if mass <= 0.0 {
             return None;
         }
-        let t = Self::invert(&self.sinc, c_lo + u * mass).clamp(lo, hi);
-        Some((t, mass))
+        Some((Self::invert(cdf, c_lo + u * mass).clamp(lo, hi), mass))
+    }
+
+    /// Pupil-plane millimetres per unit of the lenslet pattern's coordinate t = p·θ/λ, `distance_mm` away.
+    fn lenslet_scale(p_mm: f64, wavelength_nm: f64, distance_mm: f64) -> f64 {
+        wavelength_nm * 1e-6 * distance_mm / p_mm
+    }
+
+    /// Pupil-plane millimetres per unit of the Airy coordinate x = π·a·θ/λ, `distance_mm` away.
+    fn airy_scale(a_mm: f64, wavelength_nm: f64, distance_mm: f64) -> f64 {
+        wavelength_nm * 1e-6 * distance_mm / (PI * a_mm)
+    }
+
+    /// The Airy coordinates of the annulus around a ray aimed at `chief` that can reach a pupil of radius `r_p`
+    /// (`scale` from [`Self::airy_scale`]): (lo, hi, distance of the chief from the pupil's centre).
+    fn airy_annulus(scale: f64, chief: [f64; 2], r_p: f64) -> (f64, f64, f64) {
+        let c = chief[0].hypot(chief[1]);
+        ((c - r_p).max(0.0) / scale, (c + r_p) / scale, c)
     }
 
     /// A diffraction angle (radians) for a square lenslet of side `p_mm` whose undiffracted ray meets the pupil
@@ -309,7 +330,7 @@ impl DiffractionSampler {
         u2: f64,
     ) -> Option<([f64; 2], f64)> {
         // t = p·θ/λ, and the pupil plane's point is chief + distance·θ = chief + t·(λ·distance/p).
-        let scale = wavelength_nm * 1e-6 * distance_mm / p_mm;
+        let scale = Self::lenslet_scale(p_mm, wavelength_nm, distance_mm);
         let (tx, mx) = self.sinc_coordinate_within((-r_p - chief[0]) / scale, (r_p - chief[0]) / scale, u1)?;
         let x = chief[0] + tx * scale;
         let half = (r_p * r_p - x * x).max(0.0).sqrt();
@@ -335,15 +356,10 @@ impl DiffractionSampler {
         u2: f64,
     ) -> Option<([f64; 2], f64)> {
         // x = π·a·θ/λ; the pupil-plane offset is ρ = distance·θ = x·scale.
-        let scale = wavelength_nm * 1e-6 * distance_mm / (PI * a_mm);
-        let c = chief[0].hypot(chief[1]);
-        let (lo, hi) = ((c - r_p).max(0.0) / scale, (c + r_p) / scale);
-        let (c_lo, c_hi) = (self.airy.at(lo), self.airy.at(hi));
-        let mass = c_hi - c_lo;
-        if mass <= 0.0 {
-            return None;
-        }
-        let rho = Self::invert(&self.airy, c_lo + u1 * mass).clamp(lo, hi) * scale;
+        let scale = Self::airy_scale(a_mm, wavelength_nm, distance_mm);
+        let (lo, hi, c) = Self::airy_annulus(scale, chief, r_p);
+        let (x, mass) = Self::draw_within(&self.airy, lo, hi, u1)?;
+        let rho = x * scale;
         // |chief + ρ·(cos ψ, sin ψ)| ≤ r_p ⟺ cos(ψ − ψ_c) ≤ κ, with ψ_c the chief's direction.
         let (psi, arc) = if rho + c <= r_p || c == 0.0 {
             (2.0 * PI * u2, 1.0)
@@ -374,13 +390,12 @@ impl DiffractionSampler {
         r_p: f64,
     ) -> f64 {
         if lenslet {
-            let scale = wavelength_nm * 1e-6 * distance_mm / a_mm;
+            let scale = Self::lenslet_scale(a_mm, wavelength_nm, distance_mm);
             let axis = |c: f64| self.sinc.at((r_p - c) / scale) - self.sinc.at((-r_p - c) / scale);
             axis(chief[0]) * axis(chief[1])
         } else {
-            let scale = wavelength_nm * 1e-6 * distance_mm / (PI * a_mm);
-            let c = chief[0].hypot(chief[1]);
-            self.airy.at((c + r_p) / scale) - self.airy.at((c - r_p).max(0.0) / scale)
+            let (lo, hi, _) = Self::airy_annulus(Self::airy_scale(a_mm, wavelength_nm, distance_mm), chief, r_p);
+            self.airy.at(hi) - self.airy.at(lo)
         }
     }
 

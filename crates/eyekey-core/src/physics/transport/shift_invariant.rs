@@ -228,6 +228,44 @@ fn bundle_cache() -> &'static std::sync::Mutex<BundleCache> {
 }
 
 impl Tracer<'_> {
+    /// View (i, j)'s screen pixel relative to its block's centre, mm.
+    fn view_offset(&self, i: u32, j: u32) -> [f64; 2] {
+        let d = self.display;
+        [
+            (i as f64 - (d.views_u as f64 - 1.0) / 2.0) * d.screen_pixel_pitch_mm,
+            (j as f64 - (d.views_v as f64 - 1.0) / 2.0) * d.screen_pixel_pitch_mm,
+        ]
+    }
+
+    /// A sub-ray of the view at screen offset `off` through the aperture at the origin, from the block `m`
+    /// blocks over, from four draws of `rng`: its point in the aperture (relative to the aperture's centre) and
+    /// where the undiffracted ray meets the pupil plane (mm from the pupil's centre).
+    fn ray_start(&self, rng: &mut SplitMix64, m: [i64; 2], off: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+        let d = self.display;
+        let (a, p_s) = (d.hole_diameter_mm, d.screen_pixel_pitch_mm);
+        let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
+        let u = match d.aperture {
+            Aperture::Pinhole => {
+                let rho = 0.5 * a * rng.next_f64().sqrt();
+                let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                [rho * cos, rho * sin]
+            }
+            Aperture::Lenslet => [(rng.next_f64() - 0.5) * a, (rng.next_f64() - 0.5) * a],
+        };
+        let jitter = [(rng.next_f64() - 0.5) * p_s, (rng.next_f64() - 0.5) * p_s];
+        // The lenslet collimates: its rays leave with the chief ray's slope. num = slope·g.
+        let s = match d.aperture {
+            Aperture::Pinhole => u,
+            Aperture::Lenslet => [0.0, 0.0],
+        };
+        let eye = [self.eye.x_mm, self.eye.y_mm];
+        let chief = std::array::from_fn(|n| {
+            let num = s[n] - m[n] as f64 * d.hole_pitch_mm * aim - off[n] - jitter[n];
+            u[n] + self.d_eye * num / d.gap_mm - eye[n]
+        });
+        (u, chief)
+    }
+
     /// The sampling pupil's radius for this eye: its own, rounded up to the next step.
     fn sampling_radius(&self) -> f64 {
         (self.r_p / SAMPLING_PUPIL_STEP_MM - 1e-9).ceil().max(1.0) * SAMPLING_PUPIL_STEP_MM
@@ -245,7 +283,7 @@ impl Tracer<'_> {
             self.eye,
         ));
         let key = format!(
-            "{:?} {} {} {} {} {} {} {}|{} {} {} {}|{} {} {} {}",
+            "{:?} {} {} {} {} {} {} {}|{} {} {} {}|{} {} {} {} {}",
             d.aperture,
             d.hole_pitch_mm,
             d.hole_diameter_mm,
@@ -262,7 +300,8 @@ impl Tracer<'_> {
             self.options.seed,
             r_s,
             self.grid.pixel_mm,
-        ) + &format!(" {nb}");
+            nb,
+        );
         if let Some(b) = bundle_cache().lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
             return b.clone();
         }
@@ -303,10 +342,7 @@ impl Tracer<'_> {
         let k = self.options.retina_oversample as f64;
         let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
         let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
-        let off = [
-            (i as f64 - (d.views_u as f64 - 1.0) / 2.0) * p_s,
-            (j as f64 - (d.views_v as f64 - 1.0) / 2.0) * p_s,
-        ];
+        let off = self.view_offset(i, j);
         let wave = self.options.wave.expect("a wave-optics build");
         let sampler = self.sampler.expect("a wave-optics build");
         let per_block = d.block_shift_at_pupil_mm(self.d_eye);
@@ -344,31 +380,8 @@ impl Tracer<'_> {
                 let block_rays = ((rays as f64 * bound).ceil() as u32).clamp(16.min(rays), rays);
                 for _ in 0..block_rays {
                     traced += 1;
-                    let (ux, uy) = match d.aperture {
-                        Aperture::Pinhole => {
-                            let rho = 0.5 * a * rng.next_f64().sqrt();
-                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
-                            (rho * cos, rho * sin)
-                        }
-                        Aperture::Lenslet => ((rng.next_f64() - 0.5) * a, (rng.next_f64() - 0.5) * a),
-                    };
-                    let jx = (rng.next_f64() - 0.5) * p_s;
-                    let jy = (rng.next_f64() - 0.5) * p_s;
+                    let ([ux, uy], chief) = self.ray_start(&mut rng, [mx, my], off);
                     let (u1, u2) = (rng.next_f64(), rng.next_f64());
-                    // The aperture at the origin, the sample's block m blocks over: num = slope·g.
-                    let s = match d.aperture {
-                        Aperture::Pinhole => [ux, uy],
-                        Aperture::Lenslet => [0.0, 0.0],
-                    };
-                    let num = [
-                        s[0] - mx as f64 * pitch * aim - off[0] - jx,
-                        s[1] - my as f64 * pitch * aim - off[1] - jy,
-                    ];
-                    // Where the undiffracted ray meets the pupil plane, relative to the pupil's centre.
-                    let chief = [
-                        ux + self.d_eye * num[0] / d.gap_mm - self.eye.x_mm,
-                        uy + self.d_eye * num[1] / d.gap_mm - self.eye.y_mm,
-                    ];
                     let (lambda, d_eye) = (wave.wavelength_nm, self.d_eye);
                     let drawn = match d.aperture {
                         Aperture::Pinhole => sampler.pinhole_angle_into_pupil(a, lambda, d_eye, chief, r_s, u1, u2),
@@ -408,12 +421,8 @@ impl Tracer<'_> {
     ) -> ViewKernel {
         let d = self.display;
         let k = self.options.retina_oversample as f64;
-        let (pitch, a, p_s) = (d.hole_pitch_mm, d.hole_diameter_mm, d.screen_pixel_pitch_mm);
-        let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
-        let off = [
-            (i as f64 - (d.views_u as f64 - 1.0) / 2.0) * p_s,
-            (j as f64 - (d.views_v as f64 - 1.0) / 2.0) * p_s,
-        ];
+        let (pitch, a) = (d.hole_pitch_mm, d.hole_diameter_mm);
+        let off = self.view_offset(i, j);
         let wave = self.options.wave.expect("a wave-optics build");
         let per_block = d.block_shift_at_pupil_mm(self.d_eye);
         let centre = |e: f64| (-e / per_block).round() as i64;
@@ -485,32 +494,9 @@ impl Tracer<'_> {
                 let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
                 for ray in 0..rays as usize {
                     traced += 1;
-                    let (ux, uy) = match d.aperture {
-                        Aperture::Pinhole => {
-                            let rho = 0.5 * a * rng.next_f64().sqrt();
-                            let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
-                            (rho * cos, rho * sin)
-                        }
-                        Aperture::Lenslet => ((rng.next_f64() - 0.5) * a, (rng.next_f64() - 0.5) * a),
-                    };
-                    let jx = (rng.next_f64() - 0.5) * p_s;
-                    let jy = (rng.next_f64() - 0.5) * p_s;
+                    let ([ux, uy], chief) = self.ray_start(&mut rng, [mx, my], off);
                     // Two draws the angle-sampled rays use, kept so that each ray's jitter is the same.
                     let _ = (rng.next_f64(), rng.next_f64());
-                    // The aperture at the origin, the sample's block m blocks over: num = slope·g.
-                    let s = match d.aperture {
-                        Aperture::Pinhole => [ux, uy],
-                        Aperture::Lenslet => [0.0, 0.0],
-                    };
-                    let num = [
-                        s[0] - mx as f64 * pitch * aim - off[0] - jx,
-                        s[1] - my as f64 * pitch * aim - off[1] - jy,
-                    ];
-                    // Where the undiffracted ray meets the pupil plane, relative to the pupil's centre.
-                    let chief = [
-                        ux + self.d_eye * num[0] / d.gap_mm - self.eye.x_mm,
-                        uy + self.d_eye * num[1] / d.gap_mm - self.eye.y_mm,
-                    ];
                     let p = ray % table.points.len();
                     let [rx, ry] = table.points[p];
                     let theta = [

@@ -355,6 +355,17 @@ struct Layout {
     row_len: usize,
 }
 
+/// Calls `$this.$method::<FMA, B>(args)` with B the layout's register block width (16, 32 or `LANES`).
+macro_rules! by_lanes {
+    ($lanes:expr, $this:ident . $method:ident :: <$fma:literal> ($($arg:expr),*)) => {
+        match $lanes {
+            16 => $this.$method::<$fma, 16>($($arg),*),
+            32 => $this.$method::<$fma, 32>($($arg),*),
+            _ => $this.$method::<$fma, LANES>($($arg),*),
+        }
+    };
+}
+
 impl Pass<'_> {
     /// Output rows gy, gy + 1, … of the forward product into `acc`, k·nx_blocks values a row (phase-major:
     /// phase φ's holes at [φ·nx_blocks, φ·nx_blocks + nx)).
@@ -363,11 +374,7 @@ impl Pass<'_> {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
             Simd::Avx2 => unsafe { self.forward_rows_avx2(gy, acc) },
-            _ => match self.layout.lanes {
-                16 => self.forward_rows_with::<false, 16>(gy, acc),
-                32 => self.forward_rows_with::<false, 32>(gy, acc),
-                _ => self.forward_rows_with::<false, LANES>(gy, acc),
-            },
+            _ => by_lanes!(self.layout.lanes, self.forward_rows_with::<false>(gy, acc)),
         }
     }
 
@@ -377,32 +384,20 @@ impl Pass<'_> {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd()` found the features the called function is compiled for.
             Simd::Avx2 => unsafe { self.adjoint_row_avx2(row, dst) },
-            _ => match self.layout.lanes {
-                16 => self.adjoint_row_with::<false, 16>(row, dst),
-                32 => self.adjoint_row_with::<false, 32>(row, dst),
-                _ => self.adjoint_row_with::<false, LANES>(row, dst),
-            },
+            _ => by_lanes!(self.layout.lanes, self.adjoint_row_with::<false>(row, dst)),
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn forward_rows_avx2(&self, gy: i64, acc: &mut [f32]) {
-        match self.layout.lanes {
-            16 => self.forward_rows_with::<true, 16>(gy, acc),
-            32 => self.forward_rows_with::<true, 32>(gy, acc),
-            _ => self.forward_rows_with::<true, LANES>(gy, acc),
-        }
+        by_lanes!(self.layout.lanes, self.forward_rows_with::<true>(gy, acc))
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn adjoint_row_avx2(&self, row: usize, dst: &mut [f32]) {
-        match self.layout.lanes {
-            16 => self.adjoint_row_with::<true, 16>(row, dst),
-            32 => self.adjoint_row_with::<true, 32>(row, dst),
-            _ => self.adjoint_row_with::<true, LANES>(row, dst),
-        }
+        by_lanes!(self.layout.lanes, self.adjoint_row_with::<true>(row, dst))
     }
 
     /// acc_φ[x'] += Σ_j w_j·L_v(x' − s0 − j, y) for every group, for the output rows gy, gy + 1, … that `acc`
