@@ -361,7 +361,7 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
         "geometric CSR A·L / Aᵀ·y",
         "chosen / geometric time (forward / adjoint)",
     ]));
-    for name in ["paper", "lenslet", "pinhole", "dense"] {
+    for name in ["paper", "secure", "lenslet", "pinhole", "dense"] {
         let f = wave_figures(name, sub_rays)?;
         let d = &f.display;
         let flops = 2.0 * f.mads as f64;

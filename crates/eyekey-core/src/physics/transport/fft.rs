@@ -11,6 +11,13 @@
 //! - forward: T L = crop(IFFT(Σ_v K̂_v · FFT(L_v↑))), with L_v↑ view v's samples placed at (x·k, y·k);
 //! - adjoint: (Tᵀ ỹ)_v = sample(IFFT(conj(K̂_v) · FFT(ỹ padded))) at (x·k, y·k), the correlation with K_v.
 //!
+//! The grid is k times a smaller one, P = k·P' and Q = k·Q', and the views' transforms run on the small grid
+//! (the DFT's decimation identities, Oppenheim & Schafer §4.6): a signal non-zero only at multiples of k has as
+//! its P-point DFT the P'-point DFT of its samples repeated k times, FFT(L_v↑)[f] = FFT'(L_v)[f mod P']; and
+//! sampling an inverse DFT at multiples of k is the P'-point inverse DFT of the spectrum folded onto P'
+//! frequencies, sample(IFFT(Z))[x] = IFFT'(Σ_a Z[· + a·P'])[x]. So a product takes one transform per view on
+//! k² times fewer points and one on the full grid.
+//!
 //! This is the same operator as the stencils (`super::stencil`), to rounding: a test checks both products
 //! against them. Its cost is a few FFTs per view whatever the kernels' size, where the stencils' grows with
 //! their taps, so large kernels (the `paper` and `dense` presets' diffraction-limited views) run faster
@@ -61,12 +68,12 @@ fn smooth_size(at_least: usize, even: bool) -> usize {
     }
 }
 
-/// The padded size along one axis: `extent` retinal pixels, samples every `k`, taps at offsets
-/// [lo, hi] (see the module's bound).
+/// The small padded size P' along one axis (the full one is k·P'): `extent` retinal pixels, samples every
+/// `k`, taps at offsets [lo, hi] (see the module's bound).
 fn padded_size(extent: usize, k: usize, lo: i64, hi: i64, even: bool) -> usize {
     let e = extent as i64;
     let need = (e - k as i64 + hi + 1).max(e - lo).max(e);
-    smooth_size(need as usize, even)
+    smooth_size((need as usize).div_ceil(k), even)
 }
 
 impl FftPlan {
@@ -143,8 +150,15 @@ struct Scratch {
 }
 
 /// The zero-padded grid (P, Q) on which the FFT products of `views` over holes.0 × holes.1 holes, k retinal
-/// pixels per hole, equal the linear convolution (the module's bound); planning nothing.
+/// pixels per hole, equal the linear convolution (the module's bound), both multiples of k and P/k even;
+/// planning nothing.
 pub(crate) fn grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) -> (usize, usize) {
+    let (p, q) = small_grid_size(views, holes, k);
+    (p * k, q * k)
+}
+
+/// The small grid (P', Q') of the views' transforms: the padded grid is k times it.
+fn small_grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) -> (usize, usize) {
     let nonempty = || views.iter().filter(|v| v.width > 0);
     let lo_x = nonempty().map(|v| v.x0).min().unwrap_or(0);
     let hi_x = nonempty().map(|v| v.x0 + v.width as i64 - 1).max().unwrap_or(0);
@@ -158,7 +172,10 @@ pub(crate) fn grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) 
 
 /// The kernels of one band (weights and each derivative term) as spectra on a padded grid.
 pub(crate) struct FftKernels {
+    /// The padded grid P×Q, of the kernels' spectra and the image's transforms.
     plan: FftPlan,
+    /// The grid P/k × Q/k of the views' transforms.
+    small: FftPlan,
     holes_x: usize,
     holes_y: usize,
     views_u: usize,
@@ -186,9 +203,10 @@ impl FftKernels {
         n_terms: usize,
         deferred: bool,
     ) -> Self {
-        let (p, q) = grid_size(views, holes, k);
+        let (p, q) = small_grid_size(views, holes, k);
         Self {
-            plan: FftPlan::new(p, q),
+            plan: FftPlan::new(p * k, q * k),
+            small: FftPlan::new(p, q),
             holes_x: holes.0,
             holes_y: holes.1,
             views_u: view_counts.0,
@@ -261,42 +279,61 @@ impl FftKernels {
         out: &mut [f32],
     ) {
         let kernels = self.spectra(views, term);
-        let plan = &self.plan;
+        let (plan, small) = (&self.plan, &self.small);
         let (p, q, k) = (plan.p, plan.q, self.k);
+        let (ps, qs, hs) = (small.p, small.q, small.h);
         let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
         let frame_w = nx * nu;
-        let mut total = (0..nu * nv)
-            .into_par_iter()
-            .fold(
-                || (plan.scratch(), vec![Complex32::default(); plan.h * q]),
-                |(mut s, mut acc), v| {
-                    let (i, j) = (v % nu, v / nu);
-                    let mut img = std::mem::take(&mut s.img);
-                    img.iter_mut().for_each(|x| *x = 0.0);
-                    for y in 0..ny {
-                        let frame_row = (y * nv + j) * frame_w;
-                        for x in 0..nx {
-                            img[y * k * p + x * k] = l[(frame_row + x * nu + i) * n_bands + band];
+        // The views' samples on their small grids, gathered in one pass over the light field: each frame row
+        // is read whole, where gathering one view at a time would read all of it once per view.
+        let mut images = vec![0f32; nu * nv * ps * qs];
+        images
+            .par_chunks_mut(nu * ps * qs)
+            .enumerate()
+            .for_each(|(j, row_of_views)| {
+                for y in 0..ny {
+                    let frame = &l[(y * nv + j) * frame_w * n_bands..][..frame_w * n_bands];
+                    for i in 0..nu {
+                        let dst = &mut row_of_views[i * ps * qs + y * ps..][..nx];
+                        for (x, d) in dst.iter_mut().enumerate() {
+                            *d = frame[(x * nu + i) * n_bands + band];
                         }
                     }
-                    let mut spec = std::mem::take(&mut s.spec);
-                    plan.forward(&mut img, (0..ny).map(|y| y * k), &mut spec, &mut s);
-                    for ((a, z), kz) in acc.iter_mut().zip(&spec).zip(&kernels[v]) {
-                        *a += z * kz;
+                }
+            });
+        let mut spectra = vec![Complex32::default(); nu * nv * hs * qs];
+        spectra
+            .par_chunks_mut(hs * qs)
+            .zip(images.par_chunks_mut(ps * qs))
+            .for_each_init(|| small.scratch(), |s, (spec, img)| small.forward(img, 0..ny, spec, s));
+        // Σ_v K̂_v · FFT(L_v↑), one column of frequencies at a time, where FFT(L_v↑)[fx, fy] =
+        // FFT'(L_v)[fx mod P', fy mod Q'] and the columns past P'/2 follow from the spectrum's symmetry,
+        // X[a, b] = conj(X[P' − a, −b]).
+        let mut total = vec![Complex32::default(); plan.h * q];
+        total.par_chunks_mut(q).enumerate().for_each_init(
+            || vec![Complex32::default(); qs],
+            |mirrored, (fx, acc)| {
+                let a = fx % ps;
+                for (v, kernel) in kernels.iter().enumerate() {
+                    let spec = &spectra[v * hs * qs..(v + 1) * hs * qs];
+                    let column: &[Complex32] = if a < hs {
+                        &spec[a * qs..(a + 1) * qs]
+                    } else {
+                        let mirror = &spec[(ps - a) * qs..(ps - a + 1) * qs];
+                        for (b, m) in mirrored.iter_mut().enumerate() {
+                            *m = mirror[(qs - b) % qs].conj();
+                        }
+                        mirrored
+                    };
+                    let k_column = &kernel[fx * q..(fx + 1) * q];
+                    for (a_run, k_run) in acc.chunks_exact_mut(qs).zip(k_column.chunks_exact(qs)) {
+                        for ((a, kz), z) in a_run.iter_mut().zip(k_run).zip(column) {
+                            *a += z * kz;
+                        }
                     }
-                    s.img = img;
-                    s.spec = spec;
-                    (s, acc)
-                },
-            )
-            .map(|(_, acc)| acc)
-            .reduce(
-                || vec![Complex32::default(); plan.h * q],
-                |mut a, b| {
-                    a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                    a
-                },
-            );
+                }
+            },
+        );
         let mut s = plan.scratch();
         let mut img = vec![0f32; p * q];
         let (w, h) = (nx * k, ny * k);
@@ -339,21 +376,41 @@ impl FftKernels {
         }
         let mut y_spec = vec![Complex32::default(); plan.h * q];
         plan.forward(&mut img, 0..h, &mut y_spec, &mut s);
-        // Per view: the correlation, sampled at the holes.
+        // Per view: the correlation, sampled at the holes: its spectrum folded onto the small grid and
+        // transformed there. Column fx of the full spectrum folds onto fx mod P' and, as the conjugate of
+        // column P − fx (the spectrum of a real image), onto (P − fx) mod P'.
+        let (ps, qs, hs) = (self.small.p, self.small.q, self.small.h);
         let mut planes = vec![0f32; nu * nv * ny * nx];
         planes.par_chunks_mut(ny * nx).enumerate().for_each_init(
-            || plan.scratch(),
-            |s, (v, plane)| {
+            || (self.small.scratch(), vec![Complex32::default(); qs]),
+            |(s, folded), (v, plane)| {
                 let mut spec = std::mem::take(&mut s.spec);
-                for ((z, yz), kz) in spec.iter_mut().zip(&y_spec).zip(&kernels[v]) {
-                    *z = yz * kz.conj();
+                spec.iter_mut().for_each(|z| *z = Complex32::default());
+                for fx in 0..plan.h {
+                    folded.iter_mut().for_each(|z| *z = Complex32::default());
+                    let at = fx * q..(fx + 1) * q;
+                    for (y_run, k_run) in y_spec[at.clone()].chunks_exact(qs).zip(kernels[v][at].chunks_exact(qs)) {
+                        for ((f, yz), kz) in folded.iter_mut().zip(y_run).zip(k_run) {
+                            *f += yz * kz.conj();
+                        }
+                    }
+                    let a = fx % ps;
+                    if a < hs {
+                        for (z, f) in spec[a * qs..(a + 1) * qs].iter_mut().zip(folded.iter()) {
+                            *z += f;
+                        }
+                    }
+                    let mirror = (p - fx) % ps;
+                    if fx != 0 && 2 * fx != p && mirror < hs {
+                        for (b, z) in spec[mirror * qs..(mirror + 1) * qs].iter_mut().enumerate() {
+                            *z += folded[(qs - b) % qs].conj();
+                        }
+                    }
                 }
                 let mut img = std::mem::take(&mut s.img);
-                plan.inverse(&mut spec, (0..ny).map(|yy| yy * k), &mut img, s);
+                self.small.inverse(&mut spec, 0..ny, &mut img, s);
                 for (r, row) in plane.chunks_exact_mut(nx).enumerate() {
-                    for (x, slot) in row.iter_mut().enumerate() {
-                        *slot = img[r * k * p + x * k];
-                    }
+                    row.copy_from_slice(&img[r * ps..r * ps + nx]);
                 }
                 s.img = img;
                 s.spec = spec;
@@ -364,14 +421,18 @@ impl FftKernels {
 }
 
 /// Whether the FFT products are expected to beat the stencils for one band: `taps` multiply-adds of the
-/// stencils against the transforms' work on the P×Q grid for `n_views` views (a forward transform per view
-/// and one inverse; the adjoint mirrors it). The constant weighs an FFT's flop, with its memory passes and
-/// transposes, against a stencil's register-resident multiply-add; it was measured by `eyekey bench --section
-/// wave`, which times both on every preset.
-pub(crate) fn fft_is_cheaper(taps: usize, n_views: usize, p: usize, q: usize) -> bool {
+/// stencils against the transforms' work on the P×Q grid for `n_views` views with k retinal pixels per hole (a
+/// forward transform per view on the (P/k)×(Q/k) grid, the spectrum product on the full one, and one inverse on
+/// it; the adjoint mirrors it). The constant weighs an FFT's flop, with its memory passes and transposes,
+/// against a stencil's register-resident multiply-add; it was measured by `eyekey bench --section wave`, which
+/// times both on every preset. At 1 the `secure` and `lenslet` presets' products also run by FFT, 1.2–2× faster
+/// alone, but the `secure` job then solved in 4.2 s against 4.3–4.9 s by stencils, held twice the memory
+/// (1.9 GB: the spectra of 7 observers × 4 bands) and evaluated cached people in 5.5 s against 2.4 s.
+pub(crate) fn fft_is_cheaper(taps: usize, n_views: usize, p: usize, q: usize, k: usize) -> bool {
     const FFT_FLOP_COST: f64 = 3.0;
     let n = (p * q) as f64;
-    // A real 2D FFT: about 2.5·N·log2(N) flops; the spectrum product 8 flops per held frequency.
-    let fft = n_views as f64 * (2.5 * n * n.log2() + 4.0 * n);
+    let small = n / (k * k) as f64;
+    // A real 2D FFT: about 2.5·N·log2(N) flops; the spectrum product 8 flops per held frequency (N/2).
+    let fft = n_views as f64 * (2.5 * small * small.log2() + 4.0 * n) + 2.5 * n * n.log2();
     FFT_FLOP_COST * fft < 2.0 * taps as f64
 }

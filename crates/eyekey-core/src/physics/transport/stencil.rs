@@ -519,7 +519,7 @@ impl StencilOperator {
     /// Uses the FFT products when [`fft_is_cheaper`] says so for these kernels.
     fn choose_method(&mut self) {
         let (p, q) = grid_size(&self.views, (self.holes_x, self.holes_y), self.k);
-        let fft = fft_is_cheaper(self.nnz(), self.n_views(), p, q);
+        let fft = fft_is_cheaper(self.nnz(), self.n_views(), p, q, self.k);
         self.fft = FftSlot(fft.then(|| Arc::new(self.fft_kernels(true))));
     }
 
