@@ -105,7 +105,7 @@ pub fn run(out: &Path, targets: u32, population: u32, only: &[String], options: 
             };
             writeln!(
                 md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} | {:.2}, {kf}{} | {} of {} | {readers} |",
+                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {:.3} | {:.2}, {kf}{} | {} of {} | {readers} |",
                 target.pupil_diameter_mm,
                 enc.solver.decoy_weight_scale,
                 r.target.legibility,

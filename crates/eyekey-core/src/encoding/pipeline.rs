@@ -98,12 +98,31 @@ pub fn encode(
         let (from, span) = (at, (0.85 - at) / 2.0);
         at += span;
         let report = |p: Progress| progress(from + span * p.iteration as f64 / o.max_iterations as f64);
-        let start = warm_start(&spec.display, &spec.document, tied);
-        let result = solve_round(spec, &cast, start, tied, scale, report, cancel)?;
+        // From the heavier solve's end: the same problem with lighter decoys, whose solution is near.
+        let result = solve_round(spec, &cast, x.clone(), tied, scale, report, cancel)?;
         absorb(&mut summary, &result);
         l = expand_tied(&spec.display, &result.x, tied);
+        x = result.x;
         summary.decoy_weight_scale = scale;
         summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
+    }
+    // Halving overshoots by up to a factor of 2, and every step down lets more people read: once the target
+    // reads at s (and not at 2s), s·√2 is tried too and kept if the target still reads.
+    if o.ensure_target_reads && summary.target_reads && scale < 1.0 {
+        let between = scale * std::f64::consts::SQRT_2;
+        let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
+        let result = solve_round(spec, &cast, x, tied, between, report, cancel)?;
+        let l_between = expand_tied(&spec.display, &result.x, tied);
+        let reads = reference.score_observer("target", &cast.target, &l_between).0.readable;
+        let lighter = (summary.termination, summary.objective, summary.lipschitz);
+        absorb(&mut summary, &result);
+        if reads {
+            l = l_between;
+            summary.decoy_weight_scale = between;
+        } else {
+            // The lighter solve's light field and end state stand; this one's iterations and time stay counted.
+            (summary.termination, summary.objective, summary.lipschitz) = lighter;
+        }
     }
     progress(0.85);
     summary.observers = cast.others.len() + 1 + cast.moved.len();
@@ -904,15 +923,16 @@ mod tests {
         // A decoy with the target's own eyes at 3 times the target's weight: the best the solve can do shows
         // both (S + 3·N)/4, the document at a quarter of the view under a high-contrast mask of 2 px blocks, and
         // the target cannot read it. Within 60 iterations it cannot at weights 3, 3/2 or 1 and can at 3/4 and
-        // below, so halving until the target reads must stop at 3/4, a scale of 1/4.
+        // below, so halving until the target reads must stop at 3/4, a scale of 1/4, and the step back up to
+        // 3·√2/4 ≈ 1.06 (a scale of √2/4) must not be kept.
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let job = |ensure_target_reads: bool| {
+        let weighted = |ensure_target_reads: bool, decoy_weight: f64| {
             let mut spec = pin_job(pin_hint());
             spec.observers = vec![spec.target.clone()];
             spec.options = EncodeOptions {
                 population_decoys: 0,
-                decoy_weight: 3.0,
+                decoy_weight,
                 leak_weight: 0.0,
                 max_iterations: 60,
                 ensure_target_reads,
@@ -920,12 +940,17 @@ mod tests {
             };
             spec
         };
+        let job = |ensure_target_reads: bool| weighted(ensure_target_reads, 3.0);
         let bare = encode(&job(false), &cache, &|_| {}, &cancel).unwrap();
         assert!(!bare.solver.target_reads, "heavy decoys hide the PIN from the target");
         assert_eq!(bare.solver.decoy_weight_scale, 1.0);
         let guarded = encode(&job(true), &cache, &|_| {}, &cancel).unwrap();
         assert!(guarded.solver.target_reads, "{:?}", guarded.solver.decoy_weight_scale);
         assert_eq!(guarded.solver.decoy_weight_scale, 0.25);
+        // From weight 2: 1 does not read, 1/2 does, and so does the step back up to 1/√2 ≈ 0.71, which is kept.
+        let between = encode(&weighted(true, 2.0), &cache, &|_| {}, &cancel).unwrap();
+        assert!(between.solver.target_reads);
+        assert!((between.solver.decoy_weight_scale - 0.25 * std::f64::consts::SQRT_2).abs() < 1e-12);
         // The summary's reading is the evaluation's: the known-font attacker on the target's own view.
         let spec = job(true);
         let g = Observer::new(
