@@ -269,6 +269,10 @@ pub struct BenchArgs {
     /// Also export the 2-observer solver problem (Matrix Market) into this directory for an external solver.
     #[arg(long)]
     pub export: Option<PathBuf>,
+    /// For `--section job`: the job with this many near-pupil decoys besides the defaults
+    /// (`near_pupil_decoys`); its figures go to their own section, `job-near-pupil`.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub near_pupil_decoys: Option<u32>,
 }
 
 /// Options of `eyekey encode`.

@@ -661,6 +661,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 _ => run.job()?,
             };
             print!("{body}");
+            let name = match (name, args.near_pupil_decoys) {
+                ("job", Some(_)) => "job-near-pupil",
+                _ => name,
+            };
             write_section(&args.out, name, &body)?;
         }
     }
@@ -751,6 +755,7 @@ impl BenchRun<'_> {
             decoy: None,
             options: EncodeOptions {
                 population_decoys: 0,
+                near_pupil_decoys: 0,
                 sub_rays: self.args.sub_rays,
                 // The paper's two-observer multiplexing (Eq. 14), as the target was set for.
                 decoy_weight: 1.0,
@@ -777,6 +782,7 @@ impl BenchRun<'_> {
             decoy: None,
             options: EncodeOptions {
                 document_text: Some(text.clone()),
+                near_pupil_decoys: self.args.near_pupil_decoys.unwrap_or(0),
                 ..Default::default()
             },
         };
@@ -830,13 +836,23 @@ impl BenchRun<'_> {
                 p.readable_count
             ))
         };
+        let near = self
+            .args
+            .near_pupil_decoys
+            .map_or(String::new(), |n| format!(" --near-pupil-decoys {n}"));
+        let near_option = self
+            .args
+            .near_pupil_decoys
+            .map_or(String::new(), |n| format!(" but {n} near-pupil decoys"));
+        let scale = encoded.solver.decoy_weight_scale;
         let cold = evaluate_1000("people's operators built")?;
         let warm = evaluate_1000("people's operators cached")?;
         Ok(format!(
-            "Measured {} by `eyekey bench --section job` ({}, transport cache empty at the start): the \
-             `secure` preset, every default option ({} decoys at weight {}, leak weight {}, {} iterations at most, \
-             {} sub-rays; evaluation: {} people, camera, key sensitivity, head movement).\n\n{}\
-             | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}) |\n\
+            "Measured {} by `eyekey bench --section job{near}` ({}, transport cache empty at the start): the \
+             `secure` preset, every default option{near_option} ({} decoys at weight {}, leak weight {}, {} iterations \
+             at most, {} sub-rays; evaluation: {} people, camera, key sensitivity, head movement).\n\n{}\
+             | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}, \
+             decoy weights scaled by {scale:.3}) |\n\
              | of which: target's and decoys' operators | {t_cast:.1} s |\n\
              | of which: solve | {:.1} s ({} iterations, {}) |\n\
              | of which: evaluation and bundle | {:.1} s |\n{cold}{warm}| peak resident memory | {:.0} MB |\n",

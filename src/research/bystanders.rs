@@ -59,6 +59,7 @@ impl Baseline {
     pub(super) fn options(max_iterations: u32) -> EncodeOptions {
         EncodeOptions {
             population_decoys: 0,
+            near_pupil_decoys: 0,
             decoy_weight: 0.0,
             leak_weight: 0.0,
             ensure_target_reads: false,
@@ -77,6 +78,7 @@ impl Baseline {
             e.label,
             EncodeOptions {
                 population_decoys: e.decoys,
+                near_pupil_decoys: 0,
                 decoy_weight: e.decoy_weight,
                 head_radius_mm: e.head_radius_mm,
                 leak_weight: e.leak_weight,

@@ -313,6 +313,7 @@ impl<'a> Views<'a> {
             decoy: None,
             options: EncodeOptions {
                 population_decoys: decoys,
+                near_pupil_decoys: 0,
                 decoy: DecoyKind::Noise,
                 decoy_weight: weight,
                 optics: self.setup.optics,

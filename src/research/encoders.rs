@@ -25,6 +25,7 @@ struct Variant {
 fn variants(max_iterations: u32) -> Vec<Variant> {
     let base = EncodeOptions {
         population_decoys: 6,
+        near_pupil_decoys: 0,
         decoy_weight: 0.3,
         ..Baseline::options(max_iterations)
     };
@@ -38,6 +39,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
             "12 noise decoys, weight 0.2",
             EncodeOptions {
                 population_decoys: 12,
+                near_pupil_decoys: 0,
                 decoy_weight: 0.2,
                 ..base.clone()
             },
@@ -62,6 +64,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
             &format!("{decoys} leak-only decoys, leak weight {leak}"),
             EncodeOptions {
                 population_decoys: decoys,
+                near_pupil_decoys: 0,
                 decoy_weight: 0.0,
                 leak_weight: leak,
                 ..base.clone()
@@ -105,6 +108,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
         "12 noise decoys, weight 0.2, + leak weight 1",
         EncodeOptions {
             population_decoys: 12,
+            near_pupil_decoys: 0,
             decoy_weight: 0.2,
             leak_weight: 1.0,
             ..base.clone()

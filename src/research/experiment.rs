@@ -247,6 +247,7 @@ impl PaperSetup {
             method,
             ablation,
             population_decoys: 0,
+            near_pupil_decoys: 0,
             decoy: DecoyKind::Image,
             max_iterations,
             sub_rays: 16,
@@ -276,6 +277,7 @@ impl PaperSetup {
         let spec = self.spec(EncodeOptions {
             method: Method::Multiplex,
             population_decoys: 0,
+            near_pupil_decoys: 0,
             max_iterations,
             decoy: DecoyKind::Image,
             optics: self.optics,
@@ -733,6 +735,7 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
         decoy: None,
         options: EncodeOptions {
             population_decoys: c.decoys,
+            near_pupil_decoys: 0,
             decoy: c.decoy,
             decoy_weight: c.decoy_weight,
             max_iterations,

@@ -172,7 +172,7 @@ async fn job_body(client: &reqwest::Client, base: &str) -> Result<Value> {
         "display_id": display["display"]["id"],
         "document_id": doc["id"],
         "profile_id": profile["id"],
-        "options": {"optics": "geometric", "max_iterations": 40, "population_decoys": 1,
+        "options": {"optics": "geometric", "max_iterations": 40, "population_decoys": 1, "near_pupil_decoys": 0,
                     "evaluation_population": 0, "sub_rays": 4},
     }))
 }

@@ -334,6 +334,7 @@ pub fn fast_options() -> Value {
         "max_iterations": 5,
         "sub_rays": 2,
         "population_decoys": 1,
+        "near_pupil_decoys": 0,
         "evaluation_population": 2,
     })
 }

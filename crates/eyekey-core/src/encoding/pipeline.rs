@@ -828,6 +828,7 @@ mod tests {
                 max_iterations: 5,
                 sub_rays: 2,
                 population_decoys: 0,
+                near_pupil_decoys: 0,
                 evaluation_population: 2,
                 document_text: Some(hint),
                 ..Default::default()
@@ -879,6 +880,7 @@ mod tests {
             let mut spec = pin_job(pin_hint());
             spec.options = EncodeOptions {
                 population_decoys: 2,
+                near_pupil_decoys: 0,
                 max_iterations: 60,
                 leak_weight,
                 ensure_target_reads: false,
@@ -932,6 +934,7 @@ mod tests {
             spec.observers = vec![spec.target.clone()];
             spec.options = EncodeOptions {
                 population_decoys: 0,
+                near_pupil_decoys: 0,
                 decoy_weight,
                 leak_weight: 0.0,
                 max_iterations: 60,
