@@ -29,6 +29,8 @@ struct Encoding {
     leak_weight: f64,
     /// Camera decoys at −1, 0 and +1 D with an 8 mm aperture.
     cameras: bool,
+    /// Decoys whose pupils bracket the target's (`near_pupil_decoys`).
+    near_pupil: u32,
 }
 
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
@@ -78,7 +80,7 @@ impl Baseline {
             e.label,
             EncodeOptions {
                 population_decoys: e.decoys,
-                near_pupil_decoys: 0,
+                near_pupil_decoys: e.near_pupil,
                 decoy_weight: e.decoy_weight,
                 head_radius_mm: e.head_radius_mm,
                 leak_weight: e.leak_weight,
@@ -201,6 +203,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.0,
             leak_weight: 0.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
@@ -209,6 +212,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.0,
             leak_weight: 0.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, the target stacked on a 5 mm ring",
@@ -217,6 +221,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 5.0,
             leak_weight: 0.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1",
@@ -225,6 +230,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.0,
             leak_weight: 1.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, the target stacked on a 5 mm ring",
@@ -233,6 +239,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 5.0,
             leak_weight: 1.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 3",
@@ -241,6 +248,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.0,
             leak_weight: 3.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, camera decoys at −1, 0, +1 D (8 mm)",
@@ -249,6 +257,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.0,
             leak_weight: 1.0,
             cameras: true,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring (the head box)",
@@ -257,6 +266,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.3,
             leak_weight: 12.0,
             cameras: false,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
@@ -265,6 +275,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.3,
             leak_weight: 12.0,
             cameras: true,
+            near_pupil: 0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 20, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
@@ -273,6 +284,16 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             head_radius_mm: 0.3,
             leak_weight: 20.0,
             cameras: true,
+            near_pupil: 0,
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.3, leak penalty 3, 6 near-pupil decoys (the defaults)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.0,
+            leak_weight: 3.0,
+            cameras: false,
+            near_pupil: 6,
         },
     ];
     let mut md = String::new();
@@ -540,6 +561,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             head_radius_mm,
             leak_weight,
             cameras,
+            near_pupil: 0,
         };
         let (l, t_encode) = base.encode(&encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(

@@ -80,10 +80,11 @@ pub struct SolverSummary {
     /// Unknowns of the light field.
     pub unknowns: usize,
     /// The factor the decoys' weights (noise and leak) were finally scaled by: 1 unless the target did not read
-    /// its own view and `ensure_target_reads` halved them and solved again.
+    /// its own view and `ensure_target_reads` halved them (and tried √2 back up) and solved again.
     pub decoy_weight_scale: f64,
     /// Whether the target reads its own view of the final light field, by the evaluation's judge (the known-font
-    /// attacker with a text hint, the legibility threshold without).
+    /// attacker with a text hint, the legibility threshold without), both through the encoder's own operator
+    /// and through one whose kernels are drawn with another seed.
     pub target_reads: bool,
 }
 

@@ -87,7 +87,7 @@ pub fn encode(
         }
     }
     let mut l = expand_tied(&spec.display, &x, tied);
-    summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
+    summary.target_reads = cast.target_reads(&reference, &l);
     // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
     let has_decoys = !cast.others.is_empty();
     let mut scale = 1.0;
@@ -104,7 +104,7 @@ pub fn encode(
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
         summary.decoy_weight_scale = scale;
-        summary.target_reads = reference.score_observer("target", &cast.target, &l).0.readable;
+        summary.target_reads = cast.target_reads(&reference, &l);
     }
     // Halving overshoots by up to a factor of 2, and every step down lets more people read: once the target
     // reads at s (and not at 2s), s·√2 is tried too and kept if the target still reads.
@@ -113,7 +113,7 @@ pub fn encode(
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
         let result = solve_round(spec, &cast, x, tied, between, report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
-        let reads = reference.score_observer("target", &cast.target, &l_between).0.readable;
+        let reads = cast.target_reads(&reference, &l_between);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
         absorb(&mut summary, &result);
         if reads {
@@ -216,11 +216,18 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
     }
 }
 
+/// The target guard's second look at the target draws its kernels with the job's seed xor this.
+const GUARD_SEED: u64 = 0x6A7D;
+
 /// Who the encoder speaks to: the target (with the document as objective), the target's head-box copies,
 /// and everybody who must not read (given observers, population decoys, camera decoys, adaptive decoys),
 /// each with a decoy objective.
 struct Cast {
     target: Observer,
+    /// The target again, its kernels drawn with another seed: the target guard's second look, so that a light
+    /// field that only its own operator's sampling noise makes legible is not taken as read (the evaluation
+    /// draws a third).
+    check: Observer,
     target_objective: Vec<f32>,
     /// ‖S'_t‖², the scale of the data term.
     energy: f64,
@@ -234,6 +241,13 @@ struct Cast {
 }
 
 impl Cast {
+    /// Whether the target reads `l` by `reference`, through its own operator and through the check's.
+    fn target_reads(&self, reference: &Reference, l: &[f32]) -> bool {
+        [&self.target, &self.check]
+            .iter()
+            .all(|o| reference.score_observer("target", o, l).0.readable)
+    }
+
     fn build(
         spec: &JobSpec,
         text: Option<&crate::evaluation::DocumentText>,
@@ -248,6 +262,12 @@ impl Cast {
             ..base_transport(o)
         };
         let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, o.optics, cache)
+            .map_err(|e| observer_error("target profile", e))?;
+        let check_opts = TransportOptions {
+            seed: o.seed ^ GUARD_SEED,
+            ..base_transport(o)
+        };
+        let check = Observer::new(d, &spec.target, EyePosition::default(), &check_opts, o.optics, cache)
             .map_err(|e| observer_error("target profile", e))?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
@@ -267,6 +287,7 @@ impl Cast {
             others: Vec::new(),
             decoy_objectives: Vec::new(),
             target,
+            check,
             target_objective,
             energy,
         };
