@@ -269,9 +269,9 @@ pub struct BenchArgs {
     /// Also export the 2-observer solver problem (Matrix Market) into this directory for an external solver.
     #[arg(long)]
     pub export: Option<PathBuf>,
-    /// For `--section job`: the job with this many near-pupil decoys besides the defaults
+    /// For `--section job`: the job with this many near-pupil decoys instead of the default
     /// (`near_pupil_decoys`); its figures go to their own section, `job-near-pupil`.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16))]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16))]
     pub near_pupil_decoys: Option<u32>,
 }
 

@@ -782,7 +782,10 @@ impl BenchRun<'_> {
             decoy: None,
             options: EncodeOptions {
                 document_text: Some(text.clone()),
-                near_pupil_decoys: self.args.near_pupil_decoys.unwrap_or(0),
+                near_pupil_decoys: self
+                    .args
+                    .near_pupil_decoys
+                    .unwrap_or(EncodeOptions::default().near_pupil_decoys),
                 ..Default::default()
             },
         };
@@ -844,13 +847,15 @@ impl BenchRun<'_> {
             .args
             .near_pupil_decoys
             .map_or(String::new(), |n| format!(" but {n} near-pupil decoys"));
+        let near_pupil = spec.options.near_pupil_decoys;
         let scale = encoded.solver.decoy_weight_scale;
         let cold = evaluate_1000("people's operators built")?;
         let warm = evaluate_1000("people's operators cached")?;
         Ok(format!(
             "Measured {} by `eyekey bench --section job{near}` ({}, transport cache empty at the start): the \
-             `secure` preset, every default option{near_option} ({} decoys at weight {}, leak weight {}, {} iterations \
-             at most, {} sub-rays; evaluation: {} people, camera, key sensitivity, head movement).\n\n{}\
+             `secure` preset, every default option{near_option} ({} population and {near_pupil} near-pupil decoys at \
+             weight {}, leak weight {}, {} iterations at most, {} sub-rays; evaluation: {} people, camera, key \
+             sensitivity, head movement).\n\n{}\
              | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}, \
              decoy weights scaled by {scale:.3}) |\n\
              | of which: target's and decoys' operators | {t_cast:.1} s |\n\

@@ -83,8 +83,8 @@ pub struct SolverSummary {
     /// its own view and `ensure_target_reads` halved them (and tried √2 back up) and solved again.
     pub decoy_weight_scale: f64,
     /// Whether the target reads its own view of the final light field, by the evaluation's judge (the known-font
-    /// attacker with a text hint, the legibility threshold without), both through the encoder's own operator
-    /// and through one whose kernels are drawn with another seed.
+    /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
+    /// through two whose kernels are drawn with other seeds.
     pub target_reads: bool,
 }
 

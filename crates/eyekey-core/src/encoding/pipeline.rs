@@ -216,18 +216,18 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
     }
 }
 
-/// The target guard's second look at the target draws its kernels with the job's seed xor this.
-const GUARD_SEED: u64 = 0x6A7D;
+/// The target guard's further looks at the target draw their kernels with the job's seed xor these.
+const GUARD_SEEDS: [u64; 2] = [0x6A7D, 0x3C5B];
 
 /// Who the encoder speaks to: the target (with the document as objective), the target's head-box copies,
 /// and everybody who must not read (given observers, population decoys, camera decoys, adaptive decoys),
 /// each with a decoy objective.
 struct Cast {
     target: Observer,
-    /// The target again, its kernels drawn with another seed: the target guard's second look, so that a light
-    /// field that only its own operator's sampling noise makes legible is not taken as read (the evaluation
-    /// draws a third).
-    check: Observer,
+    /// The target again, twice, its kernels drawn with other seeds: the target guard's further looks, so that a
+    /// light field that only its own operator's sampling noise makes legible is not taken as read (the
+    /// evaluation draws a fourth).
+    checks: Vec<Observer>,
     target_objective: Vec<f32>,
     /// ‖S'_t‖², the scale of the data term.
     energy: f64,
@@ -241,10 +241,10 @@ struct Cast {
 }
 
 impl Cast {
-    /// Whether the target reads `l` by `reference`, through its own operator and through the check's.
+    /// Whether the target reads `l` by `reference`, through its own operator and through the checks'.
     fn target_reads(&self, reference: &Reference, l: &[f32]) -> bool {
-        [&self.target, &self.check]
-            .iter()
+        std::iter::once(&self.target)
+            .chain(&self.checks)
             .all(|o| reference.score_observer("target", o, l).0.readable)
     }
 
@@ -263,12 +263,17 @@ impl Cast {
         };
         let target = Observer::new(d, &spec.target, EyePosition::default(), &target_opts, o.optics, cache)
             .map_err(|e| observer_error("target profile", e))?;
-        let check_opts = TransportOptions {
-            seed: o.seed ^ GUARD_SEED,
-            ..base_transport(o)
-        };
-        let check = Observer::new(d, &spec.target, EyePosition::default(), &check_opts, o.optics, cache)
-            .map_err(|e| observer_error("target profile", e))?;
+        let checks = GUARD_SEEDS
+            .iter()
+            .map(|s| {
+                let opts = TransportOptions {
+                    seed: o.seed ^ s,
+                    ..base_transport(o)
+                };
+                Observer::new(d, &spec.target, EyePosition::default(), &opts, o.optics, cache)
+                    .map_err(|e| observer_error("target profile", e))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
@@ -287,7 +292,7 @@ impl Cast {
             others: Vec::new(),
             decoy_objectives: Vec::new(),
             target,
-            check,
+            checks,
             target_objective,
             energy,
         };
