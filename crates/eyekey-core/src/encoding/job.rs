@@ -84,7 +84,7 @@ pub struct SolverSummary {
     pub decoy_weight_scale: f64,
     /// Whether the target reads its own view of the final light field, by the evaluation's judge (the known-font
     /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
-    /// through two whose kernels are drawn with other seeds.
+    /// through one whose kernels are drawn with another seed.
     pub target_reads: bool,
 }
 
