@@ -1019,8 +1019,9 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
     )?;
     writeln!(
         md,
-        "| encoder | multiplex, {} population decoys (noise masks), decoy weight {}, leak weight {}, {} adaptive rounds, camera decoys: {}, decoy weights finally scaled by {} |",
+        "| encoder | multiplex, {} population decoys (noise masks), {} near-pupil decoys, decoy weight {}, leak weight {}, {} adaptive rounds, camera decoys: {}, decoy weights finally scaled by {:.3} |",
         options.population_decoys,
+        options.near_pupil_decoys,
         options.decoy_weight,
         options.leak_weight,
         options.adaptive_rounds,
