@@ -839,14 +839,13 @@ impl BenchRun<'_> {
                 p.readable_count
             ))
         };
-        let near = self
-            .args
-            .near_pupil_decoys
-            .map_or(String::new(), |n| format!(" --near-pupil-decoys {n}"));
-        let near_option = self
-            .args
-            .near_pupil_decoys
-            .map_or(String::new(), |n| format!(" but {n} near-pupil decoys"));
+        let (near, near_option) = match self.args.near_pupil_decoys {
+            Some(n) => (
+                format!(" --near-pupil-decoys {n}"),
+                format!(" but {n} near-pupil decoys"),
+            ),
+            None => (String::new(), String::new()),
+        };
         let near_pupil = spec.options.near_pupil_decoys;
         let scale = encoded.solver.decoy_weight_scale;
         let cold = evaluate_1000("people's operators built")?;

@@ -321,7 +321,7 @@ impl FftKernels {
                     } else {
                         let mirror = &spec[(ps - a) * qs..(ps - a + 1) * qs];
                         for (b, m) in mirrored.iter_mut().enumerate() {
-                            *m = mirror[(qs - b) % qs].conj();
+                            *m = conj_negated(mirror, b);
                         }
                         mirrored
                     };
@@ -403,7 +403,7 @@ impl FftKernels {
                     let mirror = (p - fx) % ps;
                     if fx != 0 && 2 * fx != p && mirror < hs {
                         for (b, z) in spec[mirror * qs..(mirror + 1) * qs].iter_mut().enumerate() {
-                            *z += folded[(qs - b) % qs].conj();
+                            *z += conj_negated(folded, b);
                         }
                     }
                 }
@@ -418,6 +418,12 @@ impl FftKernels {
         );
         scatter_views(out, &planes, nx, (nx, ny), (nu, nv), n_bands, band);
     }
+}
+
+/// conj(X[−b]) of a spectrum's column X over Q' frequencies: the column at the mirrored x frequency of a real
+/// image's spectrum.
+fn conj_negated(column: &[Complex32], b: usize) -> Complex32 {
+    column[(column.len() - b) % column.len()].conj()
 }
 
 /// Whether the FFT products are expected to beat the stencils for one band: `taps` multiply-adds of the
