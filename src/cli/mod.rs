@@ -191,6 +191,10 @@ pub enum ExperimentCommand {
         /// Held-out people at the target's position per encoding.
         #[arg(long, default_value_t = 30)]
         population: u32,
+        /// The target's view drawn again with this many other evaluation seeds, each read by the known-font
+        /// attacker.
+        #[arg(long, default_value_t = 4)]
+        target_looks: u32,
         /// Only these presets (repeatable; default all).
         #[arg(long)]
         preset: Vec<String>,
@@ -209,6 +213,12 @@ pub enum ExperimentCommand {
         /// Instead of the default: decoys whose pupils bracket the target's (`near_pupil_decoys`).
         #[arg(long)]
         near_pupil_decoys: Option<u32>,
+        /// Instead of the default: sub-rays per sample in the encoder's transport.
+        #[arg(long)]
+        sub_rays: Option<u32>,
+        /// Instead of the default: the known-font margin the target guard asks of the target's view.
+        #[arg(long)]
+        target_margin: Option<f64>,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -300,6 +310,10 @@ pub struct EncodeArgs {
     /// targets, docs/experiments.md §2e).
     #[arg(long)]
     pub near_pupil_decoys: Option<u32>,
+    /// Also look at each near-pupil decoy on a ring of this radius (mm) around the target's position: for
+    /// frames whose target is stacked on a ring (`--head-radius`).
+    #[arg(long)]
+    pub near_pupil_ring: Option<f64>,
     /// Weight of each decoy observer relative to the target.
     #[arg(long)]
     pub decoy_weight: Option<f64>,
@@ -309,6 +323,9 @@ pub struct EncodeArgs {
     /// Keep the decoys' weights even when the target then cannot read its own view.
     #[arg(long)]
     pub no_target_guard: bool,
+    /// The known-font margin the target guard asks of the target's view (`target_margin`).
+    #[arg(long)]
+    pub target_margin: Option<f64>,
     /// Seed for sampling and jitter.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -635,12 +652,15 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             targets,
             population,
+            target_looks,
             preset,
             decoys_at_target_pupil,
             decoys,
             decoy_weight,
             leak_weight,
             near_pupil_decoys,
+            sub_rays,
+            target_margin,
         }) => {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
@@ -649,11 +669,13 @@ pub fn run(cli: Cli) -> Result<()> {
                 decoy_weight: decoy_weight.unwrap_or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),
                 near_pupil_decoys: near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
+                sub_rays: sub_rays.unwrap_or(d.sub_rays),
+                target_margin: target_margin.unwrap_or(d.target_margin),
                 ..d
             };
             print!(
                 "{}",
-                crate::research::defaults::run(&out, targets, population, &preset, options)?
+                crate::research::defaults::run(&out, targets, population, target_looks, &preset, options)?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
@@ -796,6 +818,8 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         ablation: a.ablation,
         population_decoys: a.population_decoys.unwrap_or(d.population_decoys),
         near_pupil_decoys: a.near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
+        near_pupil_ring_mm: a.near_pupil_ring.unwrap_or(d.near_pupil_ring_mm),
+        target_margin: a.target_margin.unwrap_or(d.target_margin),
         decoy: match (a.decoy_kind, &decoy) {
             (Some(kind), _) => kind,
             (None, Some(_)) => DecoyKind::Image,

@@ -31,6 +31,10 @@ struct Encoding {
     cameras: bool,
     /// Decoys whose pupils bracket the target's (`near_pupil_decoys`).
     near_pupil: u32,
+    /// Those decoys also on a ring of this radius around the seat (`near_pupil_ring_mm`; 0 = not).
+    near_pupil_ring_mm: f64,
+    /// The camera decoys' aperture, mm (when `cameras`).
+    camera_aperture_mm: f64,
 }
 
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
@@ -81,12 +85,13 @@ impl Baseline {
             EncodeOptions {
                 population_decoys: e.decoys,
                 near_pupil_decoys: e.near_pupil,
+                near_pupil_ring_mm: e.near_pupil_ring_mm,
                 decoy_weight: e.decoy_weight,
                 head_radius_mm: e.head_radius_mm,
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: vec![-1.0, 0.0, 1.0],
-                camera_decoy_aperture_mm: 8.0,
+                camera_decoy_aperture_mm: e.camera_aperture_mm,
                 ..Self::options(max_iterations)
             },
         )
@@ -204,6 +209,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 0.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
@@ -213,6 +220,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 0.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, the target stacked on a 5 mm ring",
@@ -222,6 +231,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 0.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1",
@@ -231,6 +242,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 1.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, the target stacked on a 5 mm ring",
@@ -240,6 +253,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 1.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 3",
@@ -249,6 +264,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 3.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, camera decoys at −1, 0, +1 D (8 mm)",
@@ -258,6 +275,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 1.0,
             cameras: true,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring (the head box)",
@@ -267,6 +286,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 12.0,
             cameras: false,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
@@ -276,6 +297,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 12.0,
             cameras: true,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 20, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
@@ -285,6 +308,8 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 20.0,
             cameras: true,
             near_pupil: 0,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 3, 6 near-pupil decoys (the defaults)",
@@ -294,6 +319,85 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             leak_weight: 3.0,
             cameras: false,
             near_pupil: 6,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: false,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: false,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_aperture_mm: 8.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm) (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: true,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_aperture_mm: 8.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (4 mm) (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: true,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 4.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (4 mm) (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: true,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_aperture_mm: 4.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys), leak penalty 12, target stacked on a 0.3 mm ring (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 12.0,
+            cameras: false,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm) (a tracked head box)",
+            decoys: 6,
+            decoy_weight: 0.3,
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            cameras: true,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.0,
+            camera_aperture_mm: 8.0,
         },
     ];
     let mut md = String::new();
@@ -442,7 +546,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         "their evaluation",
         "target at 0 / 1 / 2 / 3 / 4 / 5 mm: worst legibility (ring positions read by the known-font attacker, of 4)",
     ]);
-    for (label, head_radius_mm, method, leak_weight, cameras) in [
+    let without_near_pupil = [
         (
             "encoded for the design position, shown fixed",
             0.0,
@@ -550,7 +654,59 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             20.0,
             true,
         ),
-    ] {
+    ];
+    // The defaults (leak penalty 3 and 6 near-pupil decoys), fixed and tracked, and with the head-box ring.
+    let with_near_pupil = [
+        (
+            "the defaults (leak penalty 3, 6 near-pupil decoys), shown fixed",
+            0.0,
+            HeadBoxMethod::Fixed,
+            3.0,
+            false,
+        ),
+        (
+            "the defaults, re-indexed for the tracked eye",
+            0.0,
+            HeadBoxMethod::Tracked,
+            3.0,
+            false,
+        ),
+        (
+            "the defaults, target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+            false,
+        ),
+        (
+            "the defaults with leak penalty 12, target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            12.0,
+            false,
+        ),
+        (
+            "the defaults, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+            true,
+        ),
+    ];
+    // The near-pupil decoys also looked at on a 0.8 mm ring around the seat (`near_pupil_ring_mm`).
+    let with_seat_ring = [(
+        "the defaults with the near-pupil decoys also on a 0.8 mm ring, target stacked on a 0.3 mm ring, re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        false,
+    )];
+    let rows = without_near_pupil
+        .into_iter()
+        .map(|row| (row, 0, 0.0))
+        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0)))
+        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8)));
+    for ((label, head_radius_mm, method, leak_weight, cameras), near_pupil, near_pupil_ring_mm) in rows {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
             continue;
         }
@@ -561,7 +717,9 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             head_radius_mm,
             leak_weight,
             cameras,
-            near_pupil: 0,
+            near_pupil,
+            near_pupil_ring_mm,
+            camera_aperture_mm: 8.0,
         };
         let (l, t_encode) = base.encode(&encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(

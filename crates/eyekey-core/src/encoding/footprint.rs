@@ -64,7 +64,7 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
     let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round);
     target
         + u64::from(options.population_decoys)
-        + u64::from(options.near_pupil_decoys)
+        + u64::from(options.near_pupil_decoys) * if options.near_pupil_ring_mm > 0.0 { 2 } else { 1 }
         + cameras
         + adaptive
         + extra_observers as u64
@@ -129,6 +129,12 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(footprint(&d, &o, 0).observers, 13 + 2 * 4);
+        // The near-pupil decoys looked at again on a ring beside the seat: 6 more.
+        let o = EncodeOptions {
+            near_pupil_ring_mm: 0.8,
+            ..Default::default()
+        };
+        assert_eq!(footprint(&d, &o, 0).observers, 13 + 6);
     }
 
     #[test]

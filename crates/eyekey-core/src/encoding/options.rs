@@ -76,6 +76,12 @@ pub struct EncodeOptions {
     /// (docs/experiments.md §2e).
     #[cfg_attr(feature = "openapi", schema(maximum = 16))]
     pub near_pupil_decoys: u32,
+    /// When above 0 (mm): each near-pupil decoy is looked at once more, off the target's position on a ring of
+    /// this radius (decoy k of n at angle 2πk/n), so that the eyes beside the seat (and a bystander just off one
+    /// of the display's repeats, who sees what an eye beside the seat sees) are held to noise too. For frames
+    /// whose target is stacked on a ring (`head_radius_mm`), which widens the seat (docs/experiments.md §2c).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 20.0))]
+    pub near_pupil_ring_mm: f64,
     /// What decoy observers see.
     pub decoy: DecoyKind,
     /// Weight of each decoy observer's term relative to the target's (1.0).
@@ -141,6 +147,12 @@ pub struct EncodeOptions {
     /// first: a display that cannot hide the document from the decoys then shows it to the target anyway, and
     /// the evaluation says who else reads.
     pub ensure_target_reads: bool,
+    /// Where the document's text is known: the lead (in correlation) by which the target guard asks the
+    /// known-font attacker's true glyph to beat the best other candidate in every cell of the target's view
+    /// (`KnownFontRead::margin`), through both of its looks; 0 asks only that every character reads right. A
+    /// view read right by a hair is misread under another sampling of the same eye's kernels.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 0.5))]
+    pub target_margin: f64,
     /// The document's text, font scale and secret alphabet, when it is a PIN slip or form drawn in eyekey's
     /// font (`eyekey example document`): the job's evaluation then also reads every view with the known-font
     /// attacker. Write secret characters as `*` to describe the layout without the secret; their values are
@@ -157,6 +169,7 @@ impl Default for EncodeOptions {
             population_decoys: 6,
             decoys_at_target_pupil: false,
             near_pupil_decoys: 6,
+            near_pupil_ring_mm: 0.0,
             decoy: DecoyKind::Noise,
             decoy_weight: 0.3,
             leak_weight: 3.0,
@@ -176,6 +189,7 @@ impl Default for EncodeOptions {
             camera_decoy_focus_d: vec![-0.5, 0.5],
             camera_decoy_aperture_mm: 6.0,
             ensure_target_reads: true,
+            target_margin: 0.0,
             document_text: None,
         }
     }
@@ -223,6 +237,18 @@ impl EncodeOptions {
             if !(v.is_finite() && (0.0..=100.0).contains(&v)) {
                 return bad(name, format!("must be within 0..=100, got {v}"));
             }
+        }
+        if !(self.near_pupil_ring_mm.is_finite() && (0.0..=20.0).contains(&self.near_pupil_ring_mm)) {
+            return bad(
+                "near_pupil_ring_mm",
+                format!("must be within 0..=20 mm, got {}", self.near_pupil_ring_mm),
+            );
+        }
+        if !(self.target_margin.is_finite() && (0.0..=0.5).contains(&self.target_margin)) {
+            return bad(
+                "target_margin",
+                format!("must be within 0..=0.5, got {}", self.target_margin),
+            );
         }
         if !(self.head_radius_mm.is_finite() && (0.0..=20.0).contains(&self.head_radius_mm)) {
             return bad(

@@ -87,7 +87,7 @@ pub fn encode(
         }
     }
     let mut l = expand_tied(&spec.display, &x, tied);
-    summary.target_reads = cast.target_reads(&reference, &l);
+    summary.target_reads = cast.target_reads(&reference, &l, o.target_margin);
     // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
     let has_decoys = !cast.others.is_empty();
     let mut scale = 1.0;
@@ -104,7 +104,7 @@ pub fn encode(
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
         summary.decoy_weight_scale = scale;
-        summary.target_reads = cast.target_reads(&reference, &l);
+        summary.target_reads = cast.target_reads(&reference, &l, o.target_margin);
     }
     // Halving overshoots by up to a factor of 2, and every step down lets more people read: once the target
     // reads at s (and not at 2s), s·√2 is tried too and kept if the target still reads.
@@ -113,7 +113,7 @@ pub fn encode(
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
         let result = solve_round(spec, &cast, x, tied, between, report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
-        let reads = cast.target_reads(&reference, &l_between);
+        let reads = cast.target_reads(&reference, &l_between, o.target_margin);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
         absorb(&mut summary, &result);
         if reads {
@@ -242,11 +242,13 @@ struct Cast {
 }
 
 impl Cast {
-    /// Whether the target reads `l` by `reference`, through its own operator and through the check's.
-    fn target_reads(&self, reference: &Reference, l: &[f32]) -> bool {
-        [&self.target, &self.check]
-            .iter()
-            .all(|o| reference.score_observer("target", o, l).0.readable)
+    /// Whether the target reads `l` by `reference`, through its own operator and through the check's, each
+    /// with the known-font attacker's margin at least `margin` where the text is known.
+    fn target_reads(&self, reference: &Reference, l: &[f32], margin: f64) -> bool {
+        [&self.target, &self.check].iter().all(|o| {
+            let score = reference.score_observer("target", o, l).0;
+            score.readable && score.known_font.is_none_or(|k| k.margin >= margin)
+        })
     }
 
     fn build(
@@ -322,18 +324,23 @@ impl Cast {
             }
         }
         people.extend(sampled);
-        people.extend(near_pupil_decoys(
-            spec.target.pupil_diameter_mm,
-            o.near_pupil_decoys,
-            o.seed.wrapping_add(2),
-        )?);
-        for (k, p) in people.iter().enumerate() {
+        let near = near_pupil_decoys(spec.target.pupil_diameter_mm, o.near_pupil_decoys, o.seed.wrapping_add(2))?;
+        // Everybody at the target's position, then the near-pupil decoys again beside it (`near_pupil_ring_mm`).
+        let mut looks: Vec<(VisionProfile, EyePosition)> = people
+            .into_iter()
+            .chain(near.iter().cloned())
+            .map(|p| (p, EyePosition::default()))
+            .collect();
+        if o.near_pupil_ring_mm > 0.0 {
+            looks.extend(near.into_iter().zip(ring(o.near_pupil_ring_mm, o.near_pupil_decoys)));
+        }
+        for (k, (p, eye)) in looks.iter().enumerate() {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
             }
-            let observer = self.decoy_observer(spec, p, cache, format!("observers[{k}]"))?;
+            let observer = self.decoy_observer(spec, p, *eye, cache, format!("observers[{k}]"))?;
             self.others.push(observer);
-            progress(0.05 + 0.1 * (k + 1) as f64 / people.len() as f64);
+            progress(0.05 + 0.1 * (k + 1) as f64 / looks.len() as f64);
         }
         Ok(())
     }
@@ -344,12 +351,13 @@ impl Cast {
         &self,
         spec: &JobSpec,
         person: &VisionProfile,
+        eye: EyePosition,
         cache: &TransportCache,
         field: String,
     ) -> Result<Observer, PipelineError> {
         let d = &spec.display;
         let o = &spec.options;
-        let observer = Observer::new(d, person, EyePosition::default(), &base_transport(o), o.optics, cache)
+        let observer = Observer::new(d, person, eye, &base_transport(o), o.optics, cache)
             .map_err(|e| observer_error(field, e))?;
         Ok(if o.ablation == Some(Ablation::Optical) {
             Observer::with_coupling(observer.transports.clone(), self.target.coupling_f64.clone(), d.l_max)
@@ -380,7 +388,7 @@ impl Cast {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
             }
-            let observer = self.decoy_observer(spec, p, cache, format!("adaptive candidate {k}"))?;
+            let observer = self.decoy_observer(spec, p, EyePosition::default(), cache, format!("adaptive candidate {k}"))?;
             let legibility = reference.score_observer("candidate", &observer, l_now).0.legibility;
             scored.push((legibility, observer));
         }
@@ -993,5 +1001,46 @@ mod tests {
         let attacker = crate::evaluation::KnownFontAttacker::new(&pin_hint(), w, h, grid.width, grid.height).unwrap();
         let view = crate::evaluation::luminance(&g.view(&guarded.light_field));
         assert!(attacker.read(&view).correct);
+        // A margin no view of this display reaches (every cell's true glyph ahead of the rest by 0.5 in
+        // correlation) is never met: the guard halves to its floor, 1/8, and says the target does not read.
+        let strict = |weight: f64| {
+            let mut spec = weighted(true, weight);
+            spec.options.target_margin = 0.5;
+            encode(&spec, &cache, &|_| {}, &cancel).unwrap()
+        };
+        let unmet = strict(2.0);
+        assert!(!unmet.solver.target_reads);
+        assert_eq!(unmet.solver.decoy_weight_scale, 0.125);
+    }
+
+    #[test]
+    fn near_pupil_decoys_are_also_looked_at_beside_the_seat() {
+        // Two near-pupil decoys at the seat and, with a 0.8 mm ring, again at 0.8 mm right and left (angles 0
+        // and π): four decoys, the ring's copies the same people from elsewhere, who see other light.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let cast = |ring_mm: f64| {
+            let mut spec = pin_job(pin_hint());
+            spec.options = EncodeOptions {
+                population_decoys: 0,
+                near_pupil_decoys: 2,
+                near_pupil_ring_mm: ring_mm,
+                ..spec.options
+            };
+            let text = validate_spec(&spec).unwrap();
+            (Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(), spec)
+        };
+        assert_eq!(cast(0.0).0.others.len(), 2);
+        let (ringed, spec) = cast(0.8);
+        assert_eq!(ringed.others.len(), 4);
+        // Every sample its own value (a plain field would show every eye the same picture).
+        let n = plain_light_field_for_image(&spec.display, &spec.document).len();
+        let l: Vec<f32> = (0..n as u64).map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0).collect();
+        for k in 0..2 {
+            let (seat, beside) = (ringed.others[k].view(&l), ringed.others[2 + k].view(&l));
+            let diff: f64 = seat.iter().zip(&beside).map(|(a, b)| (a - b).abs() as f64).sum();
+            let total: f64 = seat.iter().map(|a| a.abs() as f64).sum();
+            assert!(diff > 0.05 * total, "decoy {k}: the view 0.8 mm aside differs by {diff} of {total}");
+        }
     }
 }

@@ -175,6 +175,10 @@ pub struct KnownFontRead {
     pub characters: u32,
     /// The reading's mean winning correlation (the attacker's confidence).
     pub confidence: f64,
+    /// At the reading's shift, denoising and polarity: the smallest lead, over the secret cells, of the true
+    /// glyph's correlation over the best other candidate's (negative when a character is read wrong). How far
+    /// the view is from being misread.
+    pub margin: f64,
     /// Probability of reading right by guessing, |alphabet|^−n.
     pub chance: f64,
 }
@@ -311,7 +315,7 @@ impl KnownFontAttacker {
 
     /// Reads a view already denoised at each of [`crate::evaluation::DENOISE_SIGMAS`] ([`crate::evaluation::denoised`]).
     pub fn read_denoised(&self, denoised: &[Vec<f32>]) -> KnownFontRead {
-        let mut best: Option<(f64, Vec<char>)> = None;
+        let mut best: Option<(f64, Vec<char>, f64)> = None;
         for v in denoised {
             assert_eq!(v.len(), self.width * self.height, "view size");
             for dy in -1isize..=1 {
@@ -328,7 +332,8 @@ impl KnownFontAttacker {
                     for polarity in [1.0, -1.0] {
                         let mut read = Vec::with_capacity(self.cells.len());
                         let mut total = 0.0;
-                        for cell_scores in &scores {
+                        let mut margin = f64::INFINITY;
+                        for (cell, cell_scores) in self.cells.iter().zip(&scores) {
                             let (k, s) = cell_scores
                                 .iter()
                                 .map(|r| polarity * r)
@@ -336,16 +341,25 @@ impl KnownFontAttacker {
                                 .fold((0, f64::NEG_INFINITY), |a, (k, s)| if s > a.1 { (k, s) } else { a });
                             read.push(self.alphabet[k]);
                             total += s;
+                            let (mut truth, mut rival) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+                            for (&c, r) in self.alphabet.iter().zip(cell_scores) {
+                                if c == cell.truth {
+                                    truth = polarity * r;
+                                } else {
+                                    rival = rival.max(polarity * r);
+                                }
+                            }
+                            margin = margin.min(truth - rival);
                         }
                         let confidence = total / self.cells.len() as f64;
                         if best.as_ref().is_none_or(|b| confidence > b.0) {
-                            best = Some((confidence, read));
+                            best = Some((confidence, read, margin));
                         }
                     }
                 }
             }
         }
-        let (confidence, read) = best.expect("the unshifted reading always exists");
+        let (confidence, read, margin) = best.expect("the unshifted reading always exists");
         let right = read.iter().zip(&self.cells).filter(|(r, c)| **r == c.truth).count() as u32;
         KnownFontRead {
             text: read.into_iter().collect(),
@@ -353,6 +367,7 @@ impl KnownFontAttacker {
             characters_right: right,
             characters: self.cells.len() as u32,
             confidence,
+            margin,
             chance: self.chance(),
         }
     }
@@ -409,6 +424,20 @@ mod tests {
             assert!(r.correct && r.characters_right == 4 && r.characters == 4);
             assert!((r.confidence - 1.0).abs() < 1e-6, "{}", r.confidence);
             assert!((r.chance - 1e-4).abs() < 1e-12);
+            // Each cell is its true template, so the true glyph scores 1 and the margin is 1 minus the largest
+            // correlation of a true template with another glyph's.
+            let closest = a
+                .cells
+                .iter()
+                .flat_map(|c| {
+                    let t = a.alphabet.iter().position(|&x| x == c.truth).unwrap();
+                    (0..c.templates.len())
+                        .filter(move |&k| k != t)
+                        .map(move |k| ncc(&c.templates[t], &c.templates[k]))
+                })
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert!(closest > 0.3 && closest < 0.95, "{closest}");
+            assert!((r.margin - (1.0 - closest)).abs() < 1e-6, "{} vs {}", r.margin, 1.0 - closest);
         }
     }
 
@@ -422,6 +451,7 @@ mod tests {
         let r = a.read(&view_of(&other, 64));
         assert_eq!(r.text, "0736");
         assert!(!r.correct && r.characters_right == 0);
+        assert!(r.margin < 0.0, "a misread view has no margin: {}", r.margin);
         let (_, doc) = pin("4821");
         let faint: Vec<f32> = view_of(&doc, 64).iter().map(|v| 0.5 - 0.05 * v).collect();
         assert_eq!(a.read(&faint).text, "4821");

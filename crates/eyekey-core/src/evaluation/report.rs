@@ -258,6 +258,7 @@ mod tests {
                 characters_right: right,
                 characters: 4,
                 confidence: 0.5,
+                margin: if right == 4 { 0.1 } else { -0.1 },
                 chance: 1e-4,
             }),
             readable: right == 4,
