@@ -324,7 +324,11 @@ impl Cast {
             }
         }
         people.extend(sampled);
-        let near = near_pupil_decoys(spec.target.pupil_diameter_mm, o.near_pupil_decoys, o.seed.wrapping_add(2))?;
+        let near = near_pupil_decoys(
+            spec.target.pupil_diameter_mm,
+            o.near_pupil_decoys,
+            o.seed.wrapping_add(2),
+        )?;
         // Everybody at the target's position, then the near-pupil decoys again beside it (`near_pupil_ring_mm`).
         let mut looks: Vec<(VisionProfile, EyePosition)> = people
             .into_iter()
@@ -357,8 +361,8 @@ impl Cast {
     ) -> Result<Observer, PipelineError> {
         let d = &spec.display;
         let o = &spec.options;
-        let observer = Observer::new(d, person, eye, &base_transport(o), o.optics, cache)
-            .map_err(|e| observer_error(field, e))?;
+        let observer =
+            Observer::new(d, person, eye, &base_transport(o), o.optics, cache).map_err(|e| observer_error(field, e))?;
         Ok(if o.ablation == Some(Ablation::Optical) {
             Observer::with_coupling(observer.transports.clone(), self.target.coupling_f64.clone(), d.l_max)
         } else {
@@ -388,7 +392,13 @@ impl Cast {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
             }
-            let observer = self.decoy_observer(spec, p, EyePosition::default(), cache, format!("adaptive candidate {k}"))?;
+            let observer = self.decoy_observer(
+                spec,
+                p,
+                EyePosition::default(),
+                cache,
+                format!("adaptive candidate {k}"),
+            )?;
             let legibility = reference.score_observer("candidate", &observer, l_now).0.legibility;
             scored.push((legibility, observer));
         }
@@ -1028,19 +1038,27 @@ mod tests {
                 ..spec.options
             };
             let text = validate_spec(&spec).unwrap();
-            (Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(), spec)
+            (
+                Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(),
+                spec,
+            )
         };
         assert_eq!(cast(0.0).0.others.len(), 2);
         let (ringed, spec) = cast(0.8);
         assert_eq!(ringed.others.len(), 4);
         // Every sample its own value (a plain field would show every eye the same picture).
         let n = plain_light_field_for_image(&spec.display, &spec.document).len();
-        let l: Vec<f32> = (0..n as u64).map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0).collect();
+        let l: Vec<f32> = (0..n as u64)
+            .map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0)
+            .collect();
         for k in 0..2 {
             let (seat, beside) = (ringed.others[k].view(&l), ringed.others[2 + k].view(&l));
             let diff: f64 = seat.iter().zip(&beside).map(|(a, b)| (a - b).abs() as f64).sum();
             let total: f64 = seat.iter().map(|a| a.abs() as f64).sum();
-            assert!(diff > 0.05 * total, "decoy {k}: the view 0.8 mm aside differs by {diff} of {total}");
+            assert!(
+                diff > 0.05 * total,
+                "decoy {k}: the view 0.8 mm aside differs by {diff} of {total}"
+            );
         }
     }
 }

@@ -437,7 +437,12 @@ mod tests {
                 })
                 .fold(f64::NEG_INFINITY, f64::max);
             assert!(closest > 0.3 && closest < 0.95, "{closest}");
-            assert!((r.margin - (1.0 - closest)).abs() < 1e-6, "{} vs {}", r.margin, 1.0 - closest);
+            assert!(
+                (r.margin - (1.0 - closest)).abs() < 1e-6,
+                "{} vs {}",
+                r.margin,
+                1.0 - closest
+            );
         }
     }
 
