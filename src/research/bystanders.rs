@@ -27,7 +27,7 @@ struct Encoding {
     head_radius_mm: f64,
     /// The decoys' leak penalty weight (0 = off).
     leak_weight: f64,
-    /// Camera decoys at −1, 0 and +1 D with an 8 mm aperture.
+    /// Camera decoys at −1, 0 and +1 D (aperture `camera_aperture_mm`).
     cameras: bool,
     /// Decoys whose pupils bracket the target's (`near_pupil_decoys`).
     near_pupil: u32,
@@ -36,6 +36,19 @@ struct Encoding {
     /// The camera decoys' aperture, mm (when `cameras`).
     camera_aperture_mm: f64,
 }
+
+/// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
+const BASELINE: Encoding = Encoding {
+    label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
+    decoys: 6,
+    decoy_weight: 0.3,
+    head_radius_mm: 0.0,
+    leak_weight: 0.0,
+    cameras: false,
+    near_pupil: 0,
+    near_pupil_ring_mm: 0.0,
+    camera_aperture_mm: 8.0,
+};
 
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
 pub(super) struct Baseline {
@@ -205,221 +218,140 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             label: "no decoys",
             decoys: 0,
             decoy_weight: 0.0,
-            head_radius_mm: 0.0,
-            leak_weight: 0.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3 (the sweep's baseline)",
-            decoys: 6,
-            decoy_weight: 0.3,
-            head_radius_mm: 0.0,
-            leak_weight: 0.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, the target stacked on a 5 mm ring",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 5.0,
-            leak_weight: 0.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1",
-            decoys: 6,
-            decoy_weight: 0.3,
-            head_radius_mm: 0.0,
             leak_weight: 1.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, the target stacked on a 5 mm ring",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 5.0,
             leak_weight: 1.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 3",
-            decoys: 6,
-            decoy_weight: 0.3,
-            head_radius_mm: 0.0,
             leak_weight: 3.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 1, camera decoys at −1, 0, +1 D (8 mm)",
-            decoys: 6,
-            decoy_weight: 0.3,
-            head_radius_mm: 0.0,
             leak_weight: 1.0,
             cameras: true,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring (the head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 12.0,
-            cameras: false,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 12, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 12.0,
             cameras: true,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 20, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 20.0,
             cameras: true,
-            near_pupil: 0,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "6 noise decoys, weight 0.3, leak penalty 3, 6 near-pupil decoys (the defaults)",
-            decoys: 6,
-            decoy_weight: 0.3,
-            head_radius_mm: 0.0,
             leak_weight: 3.0,
-            cameras: false,
             near_pupil: 6,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
-            cameras: false,
             near_pupil: 6,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
-            cameras: false,
             near_pupil: 6,
             near_pupil_ring_mm: 0.8,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm) (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
             cameras: true,
             near_pupil: 6,
             near_pupil_ring_mm: 0.8,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (4 mm) (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
             cameras: true,
             near_pupil: 6,
-            near_pupil_ring_mm: 0.0,
             camera_aperture_mm: 4.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (4 mm) (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
             cameras: true,
             near_pupil: 6,
             near_pupil_ring_mm: 0.8,
             camera_aperture_mm: 4.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.5 mm ring), target stacked on a 0.3 mm ring (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
-            cameras: false,
             near_pupil: 6,
             near_pupil_ring_mm: 0.5,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.5 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (4 mm) (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
             cameras: true,
             near_pupil: 6,
             near_pupil_ring_mm: 0.5,
             camera_aperture_mm: 4.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys), leak penalty 12, target stacked on a 0.3 mm ring (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 12.0,
-            cameras: false,
             near_pupil: 6,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +1 D (8 mm) (a tracked head box)",
-            decoys: 6,
-            decoy_weight: 0.3,
             head_radius_mm: 0.3,
             leak_weight: 3.0,
             cameras: true,
             near_pupil: 6,
-            near_pupil_ring_mm: 0.0,
-            camera_aperture_mm: 8.0,
+            ..BASELINE
         },
     ];
     let mut md = String::new();

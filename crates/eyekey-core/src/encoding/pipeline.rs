@@ -218,16 +218,19 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
 
 /// The target guard's second look at the target draws its kernels with the job's seed xor this.
 const GUARD_SEED: u64 = 0x6A7D;
+/// ... and with this many times the job's sub-rays (at most the transport's 1,024): kernels near their
+/// expectation, which is what a real eye sees, instead of another draw as noisy as the encoder's own.
+const GUARD_SUB_RAYS: u32 = 8;
 
 /// Who the encoder speaks to: the target (with the document as objective), the target's head-box copies,
 /// and everybody who must not read (given observers, population decoys, camera decoys, adaptive decoys),
 /// each with a decoy objective.
 struct Cast {
     target: Observer,
-    /// The target again, its kernels drawn with another seed: the target guard's second look, so that a light
-    /// field that only its own operator's sampling noise makes legible is not taken as read (the evaluation draws
-    /// a third). A third look was tried: it changed no preset's outcome but one target's on `secure`, for the
-    /// worse (docs/experiments.md §2e).
+    /// The target again, its kernels drawn with another seed and `GUARD_SUB_RAYS` times the sub-rays: the target
+    /// guard's second look, so that a light field that only its own operator's sampling noise makes legible is
+    /// not taken as read. With as few sub-rays as the encoder's, it read a view that the evaluation and 6 of 7
+    /// further draws misread (docs/experiments.md §2e).
     check: Observer,
     target_objective: Vec<f32>,
     /// ‖S'_t‖², the scale of the data term.
@@ -271,6 +274,7 @@ impl Cast {
         let target = look(&target_opts)?;
         let check = look(&TransportOptions {
             seed: o.seed ^ GUARD_SEED,
+            sub_rays: (GUARD_SUB_RAYS * o.sub_rays).min(1024),
             ..base_transport(o)
         })?;
         progress(0.05);
