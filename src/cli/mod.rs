@@ -219,6 +219,10 @@ pub enum ExperimentCommand {
         /// Instead of the default: the known-font margin the target guard asks of the target's view.
         #[arg(long)]
         target_margin: Option<f64>,
+        /// Instead of the default: rounds that add as decoys the sampled candidates who still read
+        /// (`adaptive_rounds`).
+        #[arg(long)]
+        adaptive_rounds: Option<u32>,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -661,6 +665,7 @@ pub fn run(cli: Cli) -> Result<()> {
             near_pupil_decoys,
             sub_rays,
             target_margin,
+            adaptive_rounds,
         }) => {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
@@ -671,6 +676,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 near_pupil_decoys: near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
                 sub_rays: sub_rays.unwrap_or(d.sub_rays),
                 target_margin: target_margin.unwrap_or(d.target_margin),
+                adaptive_rounds: adaptive_rounds.unwrap_or(d.adaptive_rounds),
                 ..d
             };
             print!(

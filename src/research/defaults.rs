@@ -45,6 +45,7 @@ pub fn run(
         "target with 8× the sub-rays: legibility, known font",
         "held-out people who read",
         "their pupils",
+        "wavefront difference from the target's (RMS, orders ≥ 2): readers' median, everyone's median",
     ]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xD0C5);
     for &name in PRESETS {
@@ -150,6 +151,25 @@ pub fn run(
                 .filter_map(|k| Some(people.get(k)?.pupil_diameter_mm))
                 .collect();
             pupils.sort_by(f64::total_cmp);
+            // How far each person's eye is from the target's: the RMS of the difference of the two wavefronts over
+            // the smaller of the two pupils (both given that pupil, ANSI Z80.28 Annex B), defocus and above.
+            let differences: Vec<(bool, f64)> = p
+                .people
+                .iter()
+                .filter_map(|s| {
+                    let k = s.label.strip_prefix("person_")?.parse::<usize>().ok()?;
+                    Some((s.readable, wavefront_difference_um(people.get(k)?, &target).ok()?))
+                })
+                .collect();
+            let median = |mut v: Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v.get(v.len() / 2).map_or("–".to_string(), |m| format!("{m:.2} µm"))
+            };
+            let distance = format!(
+                "{}, {}",
+                median(differences.iter().filter(|d| d.0).map(|d| d.1).collect()),
+                median(differences.iter().map(|d| d.1).collect())
+            );
             let smaller = pupils.iter().filter(|&&q| q <= target.pupil_diameter_mm).count();
             let readers = match (pupils.first(), pupils.last()) {
                 (Some(lo), Some(hi)) => format!(
@@ -160,7 +180,7 @@ pub fn run(
             };
             writeln!(
                 md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {} of {} | {readers} |",
+                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {} of {} | {readers} | {distance} |",
                 target.pupil_diameter_mm,
                 enc.solver.decoy_weight_scale,
                 r.target.legibility,
@@ -173,4 +193,55 @@ pub fn run(
     }
     std::fs::write(out.join("defaults.md"), &md)?;
     Ok(md)
+}
+
+/// The RMS (µm) of the difference between `a`'s and `b`'s wavefronts in radial orders 2 and up, both over the
+/// smaller of their two pupils (the larger rescaled to it, ANSI Z80.28 Annex B): with unit-RMS terms, the root of
+/// the summed squared coefficient differences.
+fn wavefront_difference_um(
+    a: &eyekey_core::physics::profile::VisionProfile,
+    b: &eyekey_core::physics::profile::VisionProfile,
+) -> Result<f64> {
+    use eyekey_core::physics::zernike::{ZernikeCoefficients, MAX_RADIAL_ORDER};
+    let pupil = a.pupil_diameter_mm.min(b.pupil_diameter_mm);
+    let at = |p: &eyekey_core::physics::profile::VisionProfile| -> Result<Vec<f64>> {
+        Ok(ZernikeCoefficients::new(p.pupil_diameter_mm, p.zernike_um.clone())?
+            .rescaled(pupil)?
+            .coefficients_um)
+    };
+    let (ca, cb) = (at(a)?, at(b)?);
+    let n = ca.len().max(cb.len());
+    let diff: Vec<f64> = (0..n)
+        .map(|j| ca.get(j).copied().unwrap_or(0.0) - cb.get(j).copied().unwrap_or(0.0))
+        .collect();
+    Ok(ZernikeCoefficients::new(pupil, diff)?.rms_um(2..=MAX_RADIAL_ORDER))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wavefront_difference_is_the_rms_of_the_coefficient_differences_over_the_smaller_pupil() {
+        let person = |pupil: f64, c: &[(usize, f64)]| {
+            let mut p = sample_population(1, 3, Default::default()).remove(0);
+            p.pupil_diameter_mm = pupil;
+            p.zernike_um = vec![0.0; 15];
+            for &(j, v) in c {
+                p.zernike_um[j] = v;
+            }
+            p
+        };
+        // Same pupil: defocus (j = 4) 0.3 against 0 and coma (j = 7) 0.1 against 0.5: √(0.3² + 0.4²) = 0.5; tilt
+        // (j = 1) is left out.
+        let a = person(5.0, &[(4, 0.3), (7, 0.1), (1, 2.0)]);
+        let b = person(5.0, &[(7, 0.5)]);
+        assert!((wavefront_difference_um(&a, &b).unwrap() - 0.5).abs() < 1e-12);
+        // Pure defocus over 6 mm seen through 4 mm: the same dioptric power, so c(2,0) scales by (4/6)², and an
+        // eye of 4 mm with that coefficient does not differ.
+        let wide = person(6.0, &[(4, 0.9)]);
+        let narrow = person(4.0, &[(4, 0.9 * (4.0f64 / 6.0).powi(2))]);
+        assert!(wavefront_difference_um(&wide, &narrow).unwrap() < 1e-12);
+        assert!((wavefront_difference_um(&wide, &person(4.0, &[])).unwrap() - 0.4).abs() < 1e-12);
+    }
 }

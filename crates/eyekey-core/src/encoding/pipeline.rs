@@ -220,7 +220,7 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
 const GUARD_SEED: u64 = 0x6A7D;
 /// ... and with this many times the job's sub-rays (at most the transport's 1,024): kernels near their
 /// expectation, which is what a real eye sees, instead of another draw as noisy as the encoder's own.
-const GUARD_SUB_RAYS: u32 = 8;
+pub const GUARD_SUB_RAYS: u32 = 8;
 
 /// Who the encoder speaks to: the target (with the document as objective), the target's head-box copies,
 /// and everybody who must not read (given observers, population decoys, camera decoys, adaptive decoys),
@@ -386,11 +386,7 @@ impl Cast {
         cancel: &AtomicBool,
     ) -> Result<usize, PipelineError> {
         let o = &spec.options;
-        let candidates = sample_population(
-            o.adaptive_candidates as usize,
-            o.seed.wrapping_add(7_000 + 1_000 * round as u64),
-            Default::default(),
-        );
+        let candidates = adaptive_candidates(spec, round)?;
         let mut scored = Vec::new();
         for (k, p) in candidates.iter().enumerate() {
             if cancel.load(Ordering::Relaxed) {
@@ -419,6 +415,27 @@ impl Cast {
         }
         Ok(added)
     }
+}
+
+/// The people an adaptive round tries (a seed stream the evaluation never uses): `adaptive_candidates` sampled
+/// from the population, or with near-pupil decoys half of them given pupils bracketing the target's (as
+/// [`near_pupil_decoys`]): the people at the seat who read a small-pupil target's frames are those
+/// (docs/experiments.md §2e).
+fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>, PipelineError> {
+    let o = &spec.options;
+    let seed = o.seed.wrapping_add(7_000 + 1_000 * round as u64);
+    let near = if o.near_pupil_decoys > 0 {
+        o.adaptive_candidates / 2
+    } else {
+        0
+    };
+    let mut candidates = sample_population((o.adaptive_candidates - near) as usize, seed, Default::default());
+    candidates.extend(near_pupil_decoys(
+        spec.target.pupil_diameter_mm,
+        near,
+        seed.wrapping_add(500),
+    )?);
+    Ok(candidates)
 }
 
 /// `person` looking through a pupil no larger than `pupil_mm`: a larger pupil is stopped down to it, the
@@ -823,6 +840,30 @@ pub fn evaluation_files(evaluation: &crate::evaluation::Evaluation) -> std::io::
 mod tests {
     use super::*;
     use crate::evaluation::DocumentText;
+
+    #[test]
+    fn adaptive_candidates_bracket_the_target_pupil_when_near_pupil_decoys_are_asked() {
+        let mut spec = pin_job(pin_hint());
+        spec.target.pupil_diameter_mm = 4.3;
+        spec.options.adaptive_candidates = 10;
+        spec.options.near_pupil_decoys = 0;
+        let plain = adaptive_candidates(&spec, 1).unwrap();
+        assert_eq!(
+            plain,
+            sample_population(10, spec.options.seed + 8_000, Default::default())
+        );
+        spec.options.near_pupil_decoys = 6;
+        let mixed = adaptive_candidates(&spec, 1).unwrap();
+        assert_eq!(mixed.len(), 10);
+        assert_eq!(mixed[..5], plain[..5], "the population half is the same stream");
+        let near: Vec<f64> = mixed[5..].iter().map(|p| p.pupil_diameter_mm).collect();
+        // Evenly from 0.3 mm narrower to 0.7 mm wider: 4.0, 4.25, 4.5, 4.75, 5.0.
+        for (k, pupil) in near.iter().enumerate() {
+            assert!((pupil - (4.0 + 0.25 * k as f64)).abs() < 1e-9, "{near:?}");
+        }
+        // Another round draws other people.
+        assert_ne!(adaptive_candidates(&spec, 2).unwrap()[5..], mixed[5..]);
+    }
 
     #[test]
     fn near_pupil_decoys_bracket_the_target_pupil_with_rescaled_wavefronts() {
