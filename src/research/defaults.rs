@@ -81,20 +81,8 @@ pub fn run(
                 optics: options.optics,
                 ..EvaluationOptions::population_only(population, Some(text))
             };
-            let ev = evaluate(
-                &display,
-                &enc.light_field,
-                &document,
-                OBJECTIVE_LEVEL,
-                &target,
-                &[],
-                &eval_options,
-                &cache,
-                &|_| {},
-                &AtomicBool::new(false),
-            )?;
-            // The target's view alone, its kernels drawn with `seed` and `sub_rays`.
-            let target_view = |seed: u64, sub_rays: u32| {
+            // The encoded light field as the evaluation sees it, with `options`.
+            let judge = |options: &EvaluationOptions| {
                 evaluate(
                     &display,
                     &enc.light_field,
@@ -102,16 +90,21 @@ pub fn run(
                     OBJECTIVE_LEVEL,
                     &target,
                     &[],
-                    &EvaluationOptions {
-                        optics: eval_options.optics,
-                        seed,
-                        sub_rays,
-                        ..EvaluationOptions::population_only(0, eval_options.document_text.clone())
-                    },
+                    options,
                     &cache,
                     &|_| {},
                     &AtomicBool::new(false),
                 )
+            };
+            let ev = judge(&eval_options)?;
+            // The target's view alone, its kernels drawn with `seed` and `sub_rays`.
+            let target_view = |seed: u64, sub_rays: u32| {
+                judge(&EvaluationOptions {
+                    optics: eval_options.optics,
+                    seed,
+                    sub_rays,
+                    ..EvaluationOptions::population_only(0, eval_options.document_text.clone())
+                })
                 .map(|ev| ev.report.target)
             };
             // The same view drawn with other evaluation seeds: a borderline target reads under some and not others.
