@@ -125,7 +125,8 @@ pub struct EncodeOptions {
     /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
     #[cfg_attr(feature = "openapi", schema(maximum = 5))]
     pub adaptive_rounds: u32,
-    /// People sampled per adaptive round.
+    /// People sampled per adaptive round; with near-pupil decoys, half of them given pupils bracketing the
+    /// target's.
     #[cfg_attr(feature = "openapi", schema(maximum = 200))]
     pub adaptive_candidates: u32,
     /// Decoys added per adaptive round at most.
