@@ -86,6 +86,7 @@ impl TransportCache {
             "display": display, "wavefront": wavefront, "eye": eye,
             "sub_rays": options.sub_rays, "seed": options.seed,
             "oversample": options.retina_oversample, "terms": options.derivative_terms, "wave": options.wave,
+            "sequence": options.sequence,
         })
     }
 

@@ -80,6 +80,22 @@ pub struct TransportOptions {
     /// Wavelengths that stand for each band under wave optics (equal-power bins of its spectrum, each with its
     /// own diffraction and chromatic defocus; the rays are shared among them); 1 is the centroid alone.
     pub wavelengths_per_band: u32,
+    /// How the shift-invariant kernels' sub-rays are drawn (docs/design.md §2.7).
+    pub sequence: SubRaySequence,
+}
+
+/// How the shift-invariant kernels draw each sub-ray's six uniforms (its point in the aperture, in the screen
+/// pixel, and its diffraction angle). Both give every kernel as an unbiased estimate; the low-discrepancy
+/// sequence spreads one block's sub-rays evenly over the six dimensions, so the kernels' noise is lower for the
+/// same number of sub-rays (docs/design.md §2.7, BENCHMARKS.md "Kernel sampling").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SubRaySequence {
+    /// The R₆ Kronecker sequence, shifted at random per view and block (randomised quasi-Monte Carlo).
+    #[default]
+    Kronecker,
+    /// Independent uniform draws (plain Monte Carlo), for comparison.
+    Independent,
 }
 
 /// How a wave-optics build samples one band (docs/design.md §2, "Wave optics").
@@ -112,6 +128,7 @@ impl Default for TransportOptions {
             wave: None,
             max_traced_wave_bytes: super::MAX_WAVE_OPERATOR_BYTES,
             wavelengths_per_band: DEFAULT_WAVELENGTHS_PER_BAND,
+            sequence: SubRaySequence::default(),
         }
     }
 }

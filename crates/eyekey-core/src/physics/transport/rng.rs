@@ -1,4 +1,7 @@
-//! SplitMix64, the seedable generator of the sub-ray jitter.
+//! SplitMix64, the seedable generator of the sub-ray jitter, and the low-discrepancy sequence the kernels'
+//! sub-rays are drawn from.
+
+use super::SubRaySequence;
 
 /// SplitMix64 (Steele, Lea & Flood 2014): a tiny, fast, seedable generator for the sub-ray jitter.
 pub(crate) struct SplitMix64(pub(crate) u64);
@@ -15,5 +18,54 @@ impl SplitMix64 {
     /// Uniform in [0, 1).
     pub(crate) fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+}
+
+/// The dimensions of one kernel sub-ray: its point in the aperture (2), in the screen pixel (2) and its
+/// diffraction angle (2).
+pub(crate) const SUB_RAY_DIMS: usize = 6;
+
+/// The generators of the R₆ Kronecker sequence (Roberts 2018, "The unreasonable effectiveness of quasirandom
+/// sequences"): αᵢ = φ₆^−(i+1) mod 1, with φ₆ the positive root of x⁷ = x + 1 (the generalised golden ratio).
+fn r6_alpha() -> [f64; SUB_RAY_DIMS] {
+    static ALPHA: std::sync::OnceLock<[f64; SUB_RAY_DIMS]> = std::sync::OnceLock::new();
+    *ALPHA.get_or_init(|| {
+        let d = SUB_RAY_DIMS as i32;
+        let mut g = 1.1f64;
+        for _ in 0..60 {
+            g -= (g.powi(d + 1) - g - 1.0) / ((d + 1) as f64 * g.powi(d) - 1.0);
+        }
+        std::array::from_fn(|i| g.powi(-(i as i32 + 1)).fract())
+    })
+}
+
+/// One (view, block)'s sub-ray draws. With [`SubRaySequence::Kronecker`] the n-th sub-ray's six uniforms are
+/// the n-th point of the R₆ sequence shifted by a random vector drawn once from the seed (a Cranley–Patterson
+/// rotation): each point is uniform on [0, 1)⁶, so every kernel stays an unbiased estimate, and the points of
+/// one block fill the cube evenly, so the kernel's sampling noise falls faster than with independent draws
+/// ([`SubRaySequence::Independent`], SplitMix64).
+pub(crate) struct SubRayDraws {
+    shift: [f64; SUB_RAY_DIMS],
+    n: u64,
+    random: Option<SplitMix64>,
+}
+
+impl SubRayDraws {
+    pub(crate) fn new(seed: u64, sequence: SubRaySequence) -> Self {
+        let mut rng = SplitMix64(seed);
+        let shift: [f64; SUB_RAY_DIMS] = std::array::from_fn(|_| rng.next_f64());
+        let random = (sequence == SubRaySequence::Independent).then_some(rng);
+        Self { shift, n: 0, random }
+    }
+
+    /// The next sub-ray's six uniforms in [0, 1).
+    pub(crate) fn next_ray(&mut self) -> [f64; SUB_RAY_DIMS] {
+        if let Some(rng) = &mut self.random {
+            return std::array::from_fn(|_| rng.next_f64());
+        }
+        let alpha = r6_alpha();
+        let n = self.n as f64;
+        self.n += 1;
+        std::array::from_fn(|i| (self.shift[i] + n * alpha[i]).fract())
     }
 }

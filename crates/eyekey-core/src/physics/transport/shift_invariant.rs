@@ -16,7 +16,7 @@
 
 use rayon::prelude::*;
 
-use super::rng::SplitMix64;
+use super::rng::{SubRayDraws, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, Tracer};
 use crate::physics::diffraction::{airy_intensity, sinc2};
@@ -238,21 +238,21 @@ impl Tracer<'_> {
     }
 
     /// A sub-ray of the view at screen offset `off` through the aperture at the origin, from the block `m`
-    /// blocks over, from four draws of `rng`: its point in the aperture (relative to the aperture's centre) and
-    /// where the undiffracted ray meets the pupil plane (mm from the pupil's centre).
-    fn ray_start(&self, rng: &mut SplitMix64, m: [i64; 2], off: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+    /// blocks over, from the first four of its uniforms `r`: its point in the aperture (relative to the
+    /// aperture's centre) and where the undiffracted ray meets the pupil plane (mm from the pupil's centre).
+    fn ray_start(&self, r: &[f64; SUB_RAY_DIMS], m: [i64; 2], off: [f64; 2]) -> ([f64; 2], [f64; 2]) {
         let d = self.display;
         let (a, p_s) = (d.hole_diameter_mm, d.screen_pixel_pitch_mm);
         let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
         let u = match d.aperture {
             Aperture::Pinhole => {
-                let rho = 0.5 * a * rng.next_f64().sqrt();
-                let (sin, cos) = (std::f64::consts::TAU * rng.next_f64()).sin_cos();
+                let rho = 0.5 * a * r[0].sqrt();
+                let (sin, cos) = (std::f64::consts::TAU * r[1]).sin_cos();
                 [rho * cos, rho * sin]
             }
-            Aperture::Lenslet => [(rng.next_f64() - 0.5) * a, (rng.next_f64() - 0.5) * a],
+            Aperture::Lenslet => [(r[0] - 0.5) * a, (r[1] - 0.5) * a],
         };
-        let jitter = [(rng.next_f64() - 0.5) * p_s, (rng.next_f64() - 0.5) * p_s];
+        let jitter = [(r[2] - 0.5) * p_s, (r[3] - 0.5) * p_s];
         // The lenslet collimates: its rays leave with the chief ray's slope. num = slope·g.
         let s = match d.aperture {
             Aperture::Pinhole => u,
@@ -283,7 +283,7 @@ impl Tracer<'_> {
             self.eye,
         ));
         let key = format!(
-            "{:?} {} {} {} {} {} {} {}|{} {} {} {}|{} {} {} {} {}",
+            "{:?} {} {} {} {} {} {} {}|{} {} {} {}|{} {} {} {} {} {:?}",
             d.aperture,
             d.hole_pitch_mm,
             d.hole_diameter_mm,
@@ -301,6 +301,7 @@ impl Tracer<'_> {
             r_s,
             self.grid.pixel_mm,
             nb,
+            self.options.sequence,
         );
         if let Some(b) = bundle_cache().lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
             return b.clone();
@@ -360,7 +361,10 @@ impl Tracer<'_> {
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
-                let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut draws = SubRayDraws::new(
+                    self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                    self.options.sequence,
+                );
                 // Rays in proportion to an upper bound on the block's power in the pupil (from the stray
                 // crossing nearest the pupil's centre), at least 16: every block keeps at least as many rays in
                 // the pupil as draws of the whole pattern would have put there, and each carries its power.
@@ -380,8 +384,9 @@ impl Tracer<'_> {
                 let block_rays = ((rays as f64 * bound).ceil() as u32).clamp(16.min(rays), rays);
                 for _ in 0..block_rays {
                     traced += 1;
-                    let ([ux, uy], chief) = self.ray_start(&mut rng, [mx, my], off);
-                    let (u1, u2) = (rng.next_f64(), rng.next_f64());
+                    let r = draws.next_ray();
+                    let ([ux, uy], chief) = self.ray_start(&r, [mx, my], off);
+                    let (u1, u2) = (r[4], r[5]);
                     let (lambda, d_eye) = (wave.wavelength_nm, self.d_eye);
                     let drawn = match d.aperture {
                         Aperture::Pinhole => sampler.pinhole_angle_into_pupil(a, lambda, d_eye, chief, r_s, u1, u2),
@@ -491,12 +496,15 @@ impl Tracer<'_> {
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
-                let mut rng = SplitMix64(self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut draws = SubRayDraws::new(
+                    self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                    self.options.sequence,
+                );
                 for ray in 0..rays as usize {
                     traced += 1;
-                    let ([ux, uy], chief) = self.ray_start(&mut rng, [mx, my], off);
-                    // Two draws the angle-sampled rays use, kept so that each ray's jitter is the same.
-                    let _ = (rng.next_f64(), rng.next_f64());
+                    // The last two uniforms (the angle-sampled rays' diffraction angle) are not used: the pupil
+                    // point comes from the table.
+                    let ([ux, uy], chief) = self.ray_start(&draws.next_ray(), [mx, my], off);
                     let p = ray % table.points.len();
                     let [rx, ry] = table.points[p];
                     let theta = [
