@@ -269,8 +269,8 @@ pub struct BenchArgs {
     /// Sub-rays per light-field sample.
     #[arg(long, default_value_t = 16)]
     pub sub_rays: u32,
-    /// Which benchmark: transport, wave, solver, encode, job (the `secure` default job end to end) or all;
-    /// or scale (PostgreSQL, two API processes, 1/2/4 worker processes; not part of all).
+    /// Which benchmark: transport, wave, kernels (their sampling noise), solver, encode, job (the `secure` default job
+    /// end to end) or all; or scale (PostgreSQL, two API processes, 1/2/4 worker processes; not part of all).
     #[arg(long, default_value = "all")]
     pub section: String,
     /// For `--section scale`: an existing PostgreSQL server's URL (default: a throwaway server started by

@@ -19,7 +19,7 @@ use eyekey_core::encoding::solver::{minimise, Objective, SolverOptions};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{Observer, Optics};
 use eyekey_core::physics::profile::VisionProfile;
-use eyekey_core::physics::transport::{EyePosition, ProductMethod, TransportMatrix, TransportOptions};
+use eyekey_core::physics::transport::{EyePosition, ProductMethod, SubRaySequence, TransportMatrix, TransportOptions};
 
 /// Peak resident memory of this process so far, bytes (Linux `VmHWM`; 0 elsewhere).
 pub fn peak_memory_bytes() -> u64 {
@@ -409,6 +409,104 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
     Ok(out)
 }
 
+/// One person's 4-band wave operators on `display` at `eye`, built with `sub_rays` from `sequence` and `seed`,
+/// applied to a fixed light field: the retinal image, and the seconds the build took.
+fn kernel_image(
+    display: &DisplayGeometry,
+    eye: EyePosition,
+    sub_rays: u32,
+    seed: u64,
+    sequence: SubRaySequence,
+) -> Result<(Vec<f64>, f64)> {
+    use eyekey_core::physics::observer::{transports, Lens};
+    let w = bench_wavefront()?;
+    let opts = TransportOptions {
+        sub_rays,
+        seed,
+        sequence,
+        ..Default::default()
+    };
+    let lens = Lens::Eye {
+        wavefront: &w,
+        reference_nm: 555.0,
+    };
+    let t0 = Instant::now();
+    let ts = transports(display, lens, eye, &opts, Optics::Wave, &TransportCache::disabled())?;
+    let secs = t0.elapsed().as_secs_f64();
+    let n = display.n_bands();
+    let coupling: Vec<[f32; 3]> = (0..n).map(|k| [0.3 + 0.1 * k as f32, 0.5, 0.2]).collect();
+    let l: Vec<f32> = (0..ts[0].n_samples() * n)
+        .map(|i| ((i * 7919) % 13) as f32 / 13.0)
+        .collect();
+    let mut y = vec![0f32; ts[0].n_pixels() * 3];
+    for (band, t) in ts.iter().enumerate() {
+        t.forward_band_lms(None, &l, n, band, coupling[band], band > 0, &mut y);
+    }
+    Ok((y.into_iter().map(f64::from).collect(), secs))
+}
+
+/// The `kernels` section: how far one person's kernels are from converged, for independent draws against the
+/// Kronecker sequence, at the job's sub-rays and at the target guard's.
+pub fn kernels_bench(sub_rays: u32) -> Result<String> {
+    const SEEDS: u64 = 4;
+    const REFERENCE: u32 = 32;
+    let mut out = format!(
+        "One person's 4-band wave operators (the bench eye: 6 mm pupil, defocus, coma, spherical; {}          wavelengths per band), each applied to the same light field. The error is the retinal image's relative          RMS difference from a reference built with independent draws of {REFERENCE}× the job's sub-rays under          two seeds and averaged; its own error is about half the two halves' difference, shown. Each error is          the RMS over {SEEDS} seeds. The job draws {sub_rays} sub-rays; the target guard's second look {}×.\n\n",
+        eyekey_core::physics::transport::DEFAULT_WAVELENGTHS_PER_BAND,
+        pipeline::GUARD_SUB_RAYS,
+    );
+    let multiples = [1, 4, pipeline::GUARD_SUB_RAYS];
+    let mut header = vec!["display, eye".to_string(), "reference's own error".to_string()];
+    for m in multiples {
+        header.push(format!("{}× sub-rays: independent / Kronecker", m));
+    }
+    header.push("build at 1× (s)".to_string());
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    out.push_str(&table_header(&header));
+    let rel = |a: &[f64], r: &[f64]| {
+        let e: f64 = a.iter().zip(r).map(|(x, y)| (x - y).powi(2)).sum();
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        let n: f64 = r.iter().map(|y| (y - mean).powi(2)).sum();
+        e / n
+    };
+    for name in ["paper", "secure", "lenslet", "pinhole"] {
+        let display = DisplayGeometry::preset(name)?;
+        for x_mm in [0.0, 2.0] {
+            let eye = EyePosition {
+                x_mm,
+                ..Default::default()
+            };
+            let big = REFERENCE * sub_rays;
+            let (a, _) = kernel_image(&display, eye, big, 1001, SubRaySequence::Kronecker)?;
+            let (b, _) = kernel_image(&display, eye, big, 1002, SubRaySequence::Kronecker)?;
+            let reference: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 0.5 * (x + y)).collect();
+            let own = 0.5 * rel(&a, &b).sqrt();
+            let mut row = format!("| {name}, {x_mm} mm aside | {:.3} % |", 100.0 * own);
+            let mut build = 0.0;
+            for m in multiples {
+                let mut cells = Vec::new();
+                for sequence in [SubRaySequence::Independent, SubRaySequence::Kronecker] {
+                    let mut sum = 0.0;
+                    for seed in 1..=SEEDS {
+                        let (img, secs) = kernel_image(&display, eye, m * sub_rays, seed, sequence)?;
+                        if m == 1 {
+                            build += secs / (2 * SEEDS) as f64;
+                        }
+                        sum += rel(&img, &reference);
+                    }
+                    cells.push(100.0 * (sum / SEEDS as f64).sqrt());
+                }
+                write!(row, " {:.3} % / {:.3} % |", cells[0], cells[1])?;
+            }
+            writeln!(row, " {build:.2} |")?;
+            print!("{row}");
+            std::io::stdout().flush()?;
+            out.push_str(&row);
+        }
+    }
+    Ok(out)
+}
+
 /// A multiplex problem on `display` with `k` observers (target + representative + population decoys).
 pub struct BenchProblem {
     /// Observers (target first).
@@ -614,7 +712,7 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
 }
 
 /// The benchmark sections `eyekey bench --section` accepts besides `all`, in the order they run.
-const SECTIONS: [&str; 5] = ["transport", "wave", "solver", "encode", "job"];
+const SECTIONS: [&str; 6] = ["transport", "wave", "kernels", "solver", "encode", "job"];
 
 /// What every section of one `eyekey bench` run shares.
 struct BenchRun<'a> {
@@ -638,7 +736,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let all = args.section == "all";
     if !all && !SECTIONS.contains(&args.section.as_str()) {
         bail!(
-            "--section must be transport, wave, solver, encode, job, all or scale, got {:?}",
+            "--section must be transport, wave, kernels, solver, encode, job, all or scale, got {:?}",
             args.section
         );
     }
@@ -656,6 +754,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             let body = match name {
                 "transport" => run.transport()?,
                 "wave" => run.wave()?,
+                "kernels" => run.kernels()?,
                 "solver" => run.solver()?,
                 "encode" => run.encode()?,
                 _ => run.job()?,
@@ -700,6 +799,17 @@ impl BenchRun<'_> {
             self.args.sub_rays,
             build_kind(),
             wave_bench(self.args.sub_rays)?
+        ))
+    }
+
+    /// The `kernels` section: the kernels' sampling noise on four presets (the preset flag does not apply).
+    fn kernels(&self) -> Result<String> {
+        Ok(format!(
+            "Measured {} by `eyekey bench --sub-rays {} --section kernels` ({}):\n\n{}",
+            self.stamp,
+            self.args.sub_rays,
+            build_kind(),
+            kernels_bench(self.args.sub_rays)?
         ))
     }
 
