@@ -370,6 +370,10 @@ pub struct EncodeArgs {
     /// Add camera decoys: an ideal lens behind a one-band filter, shown noise.
     #[arg(long)]
     pub camera_decoys: bool,
+    /// Also look at the camera decoys from four positions on a ring of this radius (mm) around the target's:
+    /// for frames whose target is stacked on a ring (`--head-radius`).
+    #[arg(long)]
+    pub camera_decoy_ring: Option<f64>,
     /// Output bundle directory (must not exist).
     #[arg(long)]
     pub out: PathBuf,
@@ -844,6 +848,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
         adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
         camera_decoys: a.camera_decoys || d.camera_decoys,
+        camera_decoy_ring_mm: a.camera_decoy_ring.unwrap_or(d.camera_decoy_ring_mm),
         ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {

@@ -35,6 +35,10 @@ struct Encoding {
     near_pupil_ring_mm: f64,
     /// The camera decoys' aperture, mm (when `cameras`).
     camera_aperture_mm: f64,
+    /// The camera decoys' focus settings, dioptres (when `cameras`).
+    camera_focus_d: &'static [f64],
+    /// The camera decoys also on a ring of this radius around the seat (`camera_decoy_ring_mm`; 0 = not).
+    camera_ring_mm: f64,
 }
 
 /// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
@@ -48,6 +52,20 @@ const BASELINE: Encoding = Encoding {
     near_pupil: 0,
     near_pupil_ring_mm: 0.0,
     camera_aperture_mm: 8.0,
+    camera_focus_d: &[-1.0, 0.0, 1.0],
+    camera_ring_mm: 0.0,
+};
+
+/// Camera decoys at 0 and +2 D behind a 4 mm aperture, at the seat and on a 0.8 mm ring around it: the settings
+/// and the place (0.8 mm right of the seat, and its repeats every 6.4 mm) of the cameras that read ring-stacked
+/// frames (docs/experiments.md §2c).
+const CAMERA_RING: Encoding = Encoding {
+    label: "camera decoys at 0, +2 D (4 mm), also on a 0.8 mm ring",
+    cameras: true,
+    camera_aperture_mm: 4.0,
+    camera_focus_d: &[0.0, 2.0],
+    camera_ring_mm: 0.8,
+    ..BASELINE
 };
 
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
@@ -103,8 +121,9 @@ impl Baseline {
                 head_radius_mm: e.head_radius_mm,
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
-                camera_decoy_focus_d: vec![-1.0, 0.0, 1.0],
+                camera_decoy_focus_d: e.camera_focus_d.to_vec(),
                 camera_decoy_aperture_mm: e.camera_aperture_mm,
+                camera_decoy_ring_mm: e.camera_ring_mm,
                 ..Self::options(max_iterations)
             },
         )
@@ -164,6 +183,18 @@ fn score_cell(s: Option<&ViewScore>) -> String {
     }
 }
 
+/// A length in mm to 0.1 mm, without a decimal when whole (positions between the display's repeats are
+/// looked at in tenths).
+fn mm(v: f64) -> String {
+    // Adding 0 turns a rounded −0 into 0.
+    format!("{}", (v * 10.0).round() / 10.0 + 0.0)
+}
+
+/// The same with its sign.
+fn signed_mm(v: f64) -> String {
+    format!("{:+}", (v * 10.0).round() / 10.0 + 0.0)
+}
+
 fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
     md.push_str(&table_header(&[
         "position (x, y, Δd) mm",
@@ -185,11 +216,11 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
             .unwrap_or_else(|| "–".into());
         writeln!(
             md,
-            "| ({:+.0}, {:+.0}, {:+.0}) | {:.0} mm | {:.2} | {} of {} | {} | {} of {} | {} |",
-            p.eye.x_mm,
-            p.eye.y_mm,
-            p.eye.dz_mm,
-            p.distance_mm,
+            "| ({}, {}, {}) | {} mm | {:.2} | {} of {} | {} | {} of {} | {} |",
+            signed_mm(p.eye.x_mm),
+            signed_mm(p.eye.y_mm),
+            signed_mm(p.eye.dz_mm),
+            mm(p.distance_mm),
             p.relative_light,
             p.people_read,
             p.people,
@@ -339,6 +370,31 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             ..BASELINE
         },
         Encoding {
+            label: "the defaults (6 near-pupil decoys), target stacked on a 0.3 mm ring, camera decoys at 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            near_pupil: 6,
+            ..CAMERA_RING
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_radius_mm: 0.3,
+            leak_weight: 3.0,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_focus_d: &[-1.0, 0.0, 2.0],
+            ..CAMERA_RING
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 2, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_radius_mm: 0.3,
+            leak_weight: 2.0,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_focus_d: &[-1.0, 0.0, 2.0],
+            ..CAMERA_RING
+        },
+        Encoding {
             label: "the defaults (6 near-pupil decoys), leak penalty 12, target stacked on a 0.3 mm ring (a tracked head box)",
             head_radius_mm: 0.3,
             leak_weight: 12.0,
@@ -406,14 +462,15 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
         match b.nearest_reader_mm {
             Some(d) => writeln!(
                 md,
-                "**Nearest bystander who read: {d:.0} mm from the target's pupil** (nearest position looked at: {:.0} mm).\n",
-                b.nearest_position_mm
+                "**Nearest bystander who read: {} mm from the target's pupil** (nearest position looked at: {} mm).\n",
+                mm(d),
+                mm(b.nearest_position_mm)
             )?,
             None => writeln!(
                 md,
-                "**No bystander read** at any of the {} positions ({:.0} mm and farther from the target's pupil).\n",
+                "**No bystander read** at any of the {} positions ({} mm and farther from the target's pupil).\n",
                 b.positions.len(),
-                b.nearest_position_mm
+                mm(b.nearest_position_mm)
             )?,
         }
         position_rows(&mut md, b)?;
@@ -655,12 +712,45 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         3.0,
         false,
     )];
+    // Camera decoys at 0 and +2 D (4 mm) at the seat and on a 0.8 mm ring around it (`camera_decoy_ring_mm`):
+    // a camera 0.8 mm right of the seat reads the ring-stacked frames, and so do cameras at the repeats.
+    let with_camera_ring = [(
+        "the defaults, target stacked on a 0.3 mm ring, camera decoys at 0, +2 D (4 mm) also on a 0.8 mm ring, re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        true,
+    )];
+    // Both rings, and the camera decoys at −1 D as well.
+    let with_both_rings = [
+        (
+            "the defaults with the near-pupil decoys also on a 0.8 mm ring, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring, re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+            true,
+        ),
+        (
+            "the same with leak penalty 2 (near-pupil and camera decoys also on a 0.8 mm ring, target on a 0.3 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            2.0,
+            true,
+        ),
+    ];
     let rows = without_near_pupil
         .into_iter()
-        .map(|row| (row, 0, 0.0))
-        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0)))
-        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8)));
-    for ((label, head_radius_mm, method, leak_weight, cameras), near_pupil, near_pupil_ring_mm) in rows {
+        .map(|row| (row, 0, 0.0, &[][..]))
+        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0, &[][..])))
+        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8, &[][..])))
+        .chain(with_camera_ring.into_iter().map(|row| (row, 6, 0.0, &[0.0, 2.0][..])))
+        .chain(
+            with_both_rings
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..])),
+        );
+    // The last element: the focus settings of camera decoys also on a 0.8 mm ring (empty: no such ring).
+    for ((label, head_radius_mm, method, leak_weight, cameras), near_pupil, near_pupil_ring_mm, camera_ring) in rows {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
             continue;
         }
@@ -673,7 +763,14 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             cameras,
             near_pupil,
             near_pupil_ring_mm,
-            camera_aperture_mm: 8.0,
+            ..if camera_ring.is_empty() {
+                BASELINE
+            } else {
+                Encoding {
+                    camera_focus_d: camera_ring,
+                    ..CAMERA_RING
+                }
+            }
         };
         let (l, t_encode) = base.encode(&encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(
@@ -708,4 +805,20 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         &md,
     )?;
     Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{mm, signed_mm};
+
+    #[test]
+    fn positions_are_written_to_a_tenth_of_a_millimetre() {
+        assert_eq!(mm(20.0), "20");
+        assert_eq!(mm(12.8), "12.8");
+        assert_eq!(mm(19.199999), "19.2");
+        assert_eq!(signed_mm(-12.8), "-12.8");
+        assert_eq!(signed_mm(0.0), "+0");
+        assert_eq!(signed_mm(-0.01), "+0");
+        assert_eq!(signed_mm(500.0), "+500");
+    }
 }

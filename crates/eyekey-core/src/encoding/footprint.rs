@@ -57,7 +57,8 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
         0
     };
     let cameras = if options.camera_decoys {
-        options.camera_decoy_focus_d.len() as u64 * display.n_bands() as u64
+        let positions = if options.camera_decoy_ring_mm > 0.0 { 5 } else { 1 };
+        options.camera_decoy_focus_d.len() as u64 * display.n_bands() as u64 * positions
     } else {
         0
     };

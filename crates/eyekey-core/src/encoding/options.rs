@@ -142,6 +142,12 @@ pub struct EncodeOptions {
     /// Aperture of the camera decoys' lens, mm (2–10).
     #[cfg_attr(feature = "openapi", schema(minimum = 2.0, maximum = 10.0))]
     pub camera_decoy_aperture_mm: f64,
+    /// When above 0 (mm): the camera decoys are looked at once more from each of four positions on a ring of
+    /// this radius around the target's (right, left, above, below). For frames whose target is stacked on a
+    /// ring (`head_radius_mm`): a camera just beside the seat, and at the display's repeats a bystander who sees
+    /// what it sees, reads those frames (docs/experiments.md §2c).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 20.0))]
+    pub camera_decoy_ring_mm: f64,
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the last solve's end, at most 3 times, then try the
     /// weight √2 above the one that read and keep it if the target still reads. The target's reading comes
@@ -189,6 +195,7 @@ impl Default for EncodeOptions {
             camera_decoys: false,
             camera_decoy_focus_d: vec![-0.5, 0.5],
             camera_decoy_aperture_mm: 6.0,
+            camera_decoy_ring_mm: 0.0,
             ensure_target_reads: true,
             target_margin: 0.0,
             document_text: None,
@@ -243,6 +250,12 @@ impl EncodeOptions {
             return bad(
                 "near_pupil_ring_mm",
                 format!("must be within 0..=20 mm, got {}", self.near_pupil_ring_mm),
+            );
+        }
+        if !(self.camera_decoy_ring_mm.is_finite() && (0.0..=20.0).contains(&self.camera_decoy_ring_mm)) {
+            return bad(
+                "camera_decoy_ring_mm",
+                format!("must be within 0..=20 mm, got {}", self.camera_decoy_ring_mm),
             );
         }
         if !(self.target_margin.is_finite() && (0.0..=0.5).contains(&self.target_margin)) {

@@ -510,23 +510,22 @@ fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Obse
 }
 
 /// Camera decoys: an ideal lens (`camera_decoy_aperture_mm`) at each `camera_decoy_focus_d` behind each one-band
-/// filter.
+/// filter, at the target's position and, with `camera_decoy_ring_mm`, on a ring around it.
 fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let d = &spec.display;
     let o = &spec.options;
+    let mut positions = vec![EyePosition::default()];
+    if o.camera_decoy_ring_mm > 0.0 {
+        positions.extend(ring(o.camera_decoy_ring_mm, 4));
+    }
     let mut out = Vec::new();
-    for &focus in &o.camera_decoy_focus_d {
-        let lens = camera_lens(focus, o.camera_decoy_aperture_mm);
-        let transports = transports(
-            d,
-            Lens::Achromat(&lens),
-            EyePosition::default(),
-            &base_transport(o),
-            o.optics,
-            cache,
-        )
-        .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
-        out.extend(one_band_observers(transports, d));
+    for eye in positions {
+        for &focus in &o.camera_decoy_focus_d {
+            let lens = camera_lens(focus, o.camera_decoy_aperture_mm);
+            let transports = transports(d, Lens::Achromat(&lens), eye, &base_transport(o), o.optics, cache)
+                .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
+            out.extend(one_band_observers(transports, d));
+        }
     }
     Ok(out)
 }
@@ -1105,6 +1104,57 @@ mod tests {
             assert!(
                 diff > 0.05 * total,
                 "decoy {k}: the view 0.8 mm aside differs by {diff} of {total}"
+            );
+        }
+    }
+
+    #[test]
+    fn camera_decoys_are_also_looked_at_beside_the_seat() {
+        // One focus setting behind each band's filter at the seat, and with a 0.8 mm ring from four positions
+        // more; the footprint's observer count agrees, and a camera beside the seat sees other light.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let cast = |ring_mm: f64| {
+            let mut spec = pin_job(pin_hint());
+            spec.options = EncodeOptions {
+                population_decoys: 0,
+                near_pupil_decoys: 0,
+                camera_decoys: true,
+                camera_decoy_focus_d: vec![1.0],
+                camera_decoy_aperture_mm: 4.0,
+                camera_decoy_ring_mm: ring_mm,
+                ..spec.options
+            };
+            let text = validate_spec(&spec).unwrap();
+            (
+                Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(),
+                spec,
+            )
+        };
+        let bands = pin_job(pin_hint()).display.n_bands();
+        let (seat_only, spec) = cast(0.0);
+        assert_eq!(seat_only.others.len(), bands);
+        assert_eq!(
+            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0) as usize,
+            1 + bands
+        );
+        let (ringed, spec) = cast(0.8);
+        assert_eq!(ringed.others.len(), 5 * bands);
+        assert_eq!(
+            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0) as usize,
+            1 + 5 * bands
+        );
+        let n = plain_light_field_for_image(&spec.display, &spec.document).len();
+        let l: Vec<f32> = (0..n as u64)
+            .map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0)
+            .collect();
+        for ring_k in 1..5 {
+            let (seat, beside) = (ringed.others[0].view(&l), ringed.others[ring_k * bands].view(&l));
+            let diff: f64 = seat.iter().zip(&beside).map(|(a, b)| (a - b).abs() as f64).sum();
+            let total: f64 = seat.iter().map(|a| a.abs() as f64).sum();
+            assert!(
+                diff > 0.05 * total,
+                "ring position {ring_k}: the camera's view 0.8 mm aside differs by {diff} of {total}"
             );
         }
     }
