@@ -1069,42 +1069,55 @@ mod tests {
         assert_eq!(unmet.solver.decoy_weight_scale, 0.125);
     }
 
-    #[test]
-    fn near_pupil_decoys_are_also_looked_at_beside_the_seat() {
-        // Two near-pupil decoys at the seat and, with a 0.8 mm ring, again at 0.8 mm right and left (angles 0
-        // and π): four decoys, the ring's copies the same people from elsewhere, who see other light.
-        let cache = TransportCache::default();
-        let cancel = AtomicBool::new(false);
-        let cast = |ring_mm: f64| {
-            let mut spec = pin_job(pin_hint());
-            spec.options = EncodeOptions {
-                population_decoys: 0,
-                near_pupil_decoys: 2,
-                near_pupil_ring_mm: ring_mm,
-                ..spec.options
-            };
-            let text = validate_spec(&spec).unwrap();
-            (
-                Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(),
-                spec,
-            )
-        };
-        assert_eq!(cast(0.0).0.others.len(), 2);
-        let (ringed, spec) = cast(0.8);
-        assert_eq!(ringed.others.len(), 4);
-        // Every sample its own value (a plain field would show every eye the same picture).
+    /// The cast of the PIN job with `options` applied to its options.
+    fn pin_cast(options: impl FnOnce(EncodeOptions) -> EncodeOptions) -> (Cast, JobSpec) {
+        let mut spec = pin_job(pin_hint());
+        spec.options = options(spec.options);
+        let text = validate_spec(&spec).unwrap();
+        let cast = Cast::build(
+            &spec,
+            text.as_ref(),
+            &TransportCache::default(),
+            &|_| {},
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        (cast, spec)
+    }
+
+    /// Asserts that `a` and `b` see a light field with every sample its own value differently (a plain field
+    /// would show every eye the same picture): by more than 5 % of `a`'s total.
+    fn assert_views_differ(spec: &JobSpec, a: &Observer, b: &Observer, what: &str) {
         let n = plain_light_field_for_image(&spec.display, &spec.document).len();
         let l: Vec<f32> = (0..n as u64)
             .map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0)
             .collect();
+        let (va, vb) = (a.view(&l), b.view(&l));
+        let diff: f64 = va.iter().zip(&vb).map(|(x, y)| (x - y).abs() as f64).sum();
+        let total: f64 = va.iter().map(|x| x.abs() as f64).sum();
+        assert!(
+            diff > 0.05 * total,
+            "{what}: the view aside differs by {diff} of {total}"
+        );
+    }
+
+    #[test]
+    fn near_pupil_decoys_are_also_looked_at_beside_the_seat() {
+        // Two near-pupil decoys at the seat and, with a 0.8 mm ring, again at 0.8 mm right and left (angles 0
+        // and π): four decoys, the ring's copies the same people from elsewhere, who see other light.
+        let cast = |ring_mm: f64| {
+            pin_cast(|o| EncodeOptions {
+                population_decoys: 0,
+                near_pupil_decoys: 2,
+                near_pupil_ring_mm: ring_mm,
+                ..o
+            })
+        };
+        assert_eq!(cast(0.0).0.others.len(), 2);
+        let (ringed, spec) = cast(0.8);
+        assert_eq!(ringed.others.len(), 4);
         for k in 0..2 {
-            let (seat, beside) = (ringed.others[k].view(&l), ringed.others[2 + k].view(&l));
-            let diff: f64 = seat.iter().zip(&beside).map(|(a, b)| (a - b).abs() as f64).sum();
-            let total: f64 = seat.iter().map(|a| a.abs() as f64).sum();
-            assert!(
-                diff > 0.05 * total,
-                "decoy {k}: the view 0.8 mm aside differs by {diff} of {total}"
-            );
+            assert_views_differ(&spec, &ringed.others[k], &ringed.others[2 + k], &format!("decoy {k}"));
         }
     }
 
@@ -1112,50 +1125,28 @@ mod tests {
     fn camera_decoys_are_also_looked_at_beside_the_seat() {
         // One focus setting behind each band's filter at the seat, and with a 0.8 mm ring from four positions
         // more; the footprint's observer count agrees, and a camera beside the seat sees other light.
-        let cache = TransportCache::default();
-        let cancel = AtomicBool::new(false);
         let cast = |ring_mm: f64| {
-            let mut spec = pin_job(pin_hint());
-            spec.options = EncodeOptions {
+            pin_cast(|o| EncodeOptions {
                 population_decoys: 0,
                 near_pupil_decoys: 0,
                 camera_decoys: true,
                 camera_decoy_focus_d: vec![1.0],
                 camera_decoy_aperture_mm: 4.0,
                 camera_decoy_ring_mm: ring_mm,
-                ..spec.options
-            };
-            let text = validate_spec(&spec).unwrap();
-            (
-                Cast::build(&spec, text.as_ref(), &cache, &|_| {}, &cancel).unwrap(),
-                spec,
-            )
+                ..o
+            })
         };
-        let bands = pin_job(pin_hint()).display.n_bands();
+        let observers = |spec: &JobSpec| super::super::footprint::encoder_observers(&spec.display, &spec.options, 0);
         let (seat_only, spec) = cast(0.0);
+        let bands = spec.display.n_bands();
         assert_eq!(seat_only.others.len(), bands);
-        assert_eq!(
-            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0) as usize,
-            1 + bands
-        );
+        assert_eq!(observers(&spec) as usize, 1 + bands);
         let (ringed, spec) = cast(0.8);
         assert_eq!(ringed.others.len(), 5 * bands);
-        assert_eq!(
-            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0) as usize,
-            1 + 5 * bands
-        );
-        let n = plain_light_field_for_image(&spec.display, &spec.document).len();
-        let l: Vec<f32> = (0..n as u64)
-            .map(|i| ((i * 2_654_435_761) % 1_000) as f32 / 1_000.0)
-            .collect();
-        for ring_k in 1..5 {
-            let (seat, beside) = (ringed.others[0].view(&l), ringed.others[ring_k * bands].view(&l));
-            let diff: f64 = seat.iter().zip(&beside).map(|(a, b)| (a - b).abs() as f64).sum();
-            let total: f64 = seat.iter().map(|a| a.abs() as f64).sum();
-            assert!(
-                diff > 0.05 * total,
-                "ring position {ring_k}: the camera's view 0.8 mm aside differs by {diff} of {total}"
-            );
+        assert_eq!(observers(&spec) as usize, 1 + 5 * bands);
+        for k in 1..5 {
+            let what = format!("ring position {k}");
+            assert_views_differ(&spec, &ringed.others[0], &ringed.others[k * bands], &what);
         }
     }
 }

@@ -470,6 +470,33 @@ mod tests {
         }
     }
 
+    /// `tiny` with lenslets filling their pitch.
+    fn tiny_lenslet() -> DisplayGeometry {
+        let mut lenslet = tiny();
+        lenslet.aperture = Aperture::Lenslet;
+        lenslet.hole_diameter_mm = lenslet.hole_pitch_mm;
+        lenslet
+    }
+
+    /// An eye 2 mm to the right of the design position.
+    fn two_mm_aside() -> EyePosition {
+        EyePosition {
+            x_mm: 2.0,
+            ..Default::default()
+        }
+    }
+
+    /// The LMS values of the retinal pixels at least two apertures from the edge of `d`.
+    fn interior(d: &DisplayGeometry, y: &[f32]) -> Vec<f64> {
+        let mut v = Vec::new();
+        for yy in 2..d.holes_y - 2 {
+            for x in 2..d.holes_x - 2 {
+                v.extend((0..3).map(|ch| y[((yy * d.holes_x + x) * 3 + ch) as usize] as f64));
+            }
+        }
+        v
+    }
+
     fn coupling4() -> Vec<[f32; 3]> {
         vec![[0.9, 0.3, 0.0], [0.5, 0.8, 0.05], [0.1, 0.2, 0.9], [0.7, 0.1, 0.0]]
     }
@@ -672,9 +699,7 @@ mod tests {
         // seen at the image's value within the Monte-Carlo noise of 64 sub-rays × 25 views × 9 blocks, of which
         // about a third enter the pupil (1.6 % relative standard deviation: 6 % is four of them). The
         // shift-invariant kernels (4096 sub-rays per view and block) have no per-aperture noise at all.
-        let mut lenslet = tiny();
-        lenslet.aperture = Aperture::Lenslet;
-        lenslet.hole_diameter_mm = lenslet.hole_pitch_mm;
+        let lenslet = tiny_lenslet();
         let kernels = TransportOptions {
             wave: wave(550.0, 1).wave.map(|w| WaveSampling { kernel_rays: 4096, ..w }),
             ..wave(550.0, 1)
@@ -969,13 +994,8 @@ mod tests {
         // sub-rays × the in-pupil fraction (≥ 0.1) ≈ 6000 landings, 1.3 % relative, over interior pixels.
         // The brightness constants differ too (25 sampled apertures against the exact kernel sum, < 1 %).
         // 4 % is three standard deviations of both together.
-        let mut lenslet = tiny();
-        lenslet.aperture = Aperture::Lenslet;
-        lenslet.hole_diameter_mm = lenslet.hole_pitch_mm;
-        let aside = EyePosition {
-            x_mm: 2.0,
-            ..Default::default()
-        };
+        let lenslet = tiny_lenslet();
+        let aside = two_mm_aside();
         for d in [tiny(), lenslet] {
             for eye in [EyePosition::default(), aside] {
                 let traced = TransportOptions {
@@ -994,17 +1014,7 @@ mod tests {
                 let (mut ya, mut yb) = (vec![0f32; a.n_pixels() * 3], vec![0f32; a.n_pixels() * 3]);
                 a.forward_lms(&l, &c, &mut ya);
                 b.forward_lms(&l, &c, &mut yb);
-                let (mut diff, mut norm) = (0.0, 0.0);
-                for y in 2..d.holes_y - 2 {
-                    for x in 2..d.holes_x - 2 {
-                        for ch in 0..3 {
-                            let r = ((y * d.holes_x + x) * 3 + ch) as usize;
-                            diff += (ya[r] as f64 - yb[r] as f64).powi(2);
-                            norm += (ya[r] as f64).powi(2);
-                        }
-                    }
-                }
-                let rel = (diff / norm).sqrt();
+                let rel = rel_rms(&interior(&d, &yb), &interior(&d, &ya));
                 assert!(rel < 0.04, "{:?} eye {:?}: relative difference {rel}", d.aperture, eye);
             }
         }
@@ -1030,13 +1040,7 @@ mod tests {
         let l = rand_vec(t.n_samples() * 4, 5);
         let mut y = vec![0f32; t.n_pixels() * 3];
         t.forward_lms(&l, &coupling4(), &mut y);
-        let mut v = Vec::new();
-        for yy in 2..d.holes_y - 2 {
-            for x in 2..d.holes_x - 2 {
-                v.extend((0..3).map(|ch| y[((yy * d.holes_x + x) * 3 + ch) as usize] as f64));
-            }
-        }
-        v
+        interior(d, &y)
     }
 
     #[test]
@@ -1048,13 +1052,8 @@ mod tests {
         // rotations is closer than one (each rotation is an independent unbiased estimate, so the mean is up to
         // √6 closer, less the reference's own error: measured 0.36× and 0.53×; a biased or unrotated sequence
         // does not come closer: 1.0×).
-        let mut lenslet = tiny();
-        lenslet.aperture = Aperture::Lenslet;
-        lenslet.hole_diameter_mm = lenslet.hole_pitch_mm;
-        let aside = EyePosition {
-            x_mm: 2.0,
-            ..Default::default()
-        };
+        let lenslet = tiny_lenslet();
+        let aside = two_mm_aside();
         for d in [tiny(), lenslet] {
             let reference: Vec<f64> = {
                 let a = kernel_view(&d, aside, 65_536, 98, SubRaySequence::Independent);
