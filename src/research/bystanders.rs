@@ -39,6 +39,8 @@ struct Encoding {
     camera_focus_d: &'static [f64],
     /// The camera decoys also on a ring of this radius around the seat (`camera_decoy_ring_mm`; 0 = not).
     camera_ring_mm: f64,
+    /// Positions of the target on its ring (`head_positions`).
+    head_positions: u32,
 }
 
 /// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
@@ -54,6 +56,7 @@ const BASELINE: Encoding = Encoding {
     camera_aperture_mm: 8.0,
     camera_focus_d: &[-1.0, 0.0, 1.0],
     camera_ring_mm: 0.0,
+    head_positions: 4,
 };
 
 /// Camera decoys at 0 and +2 D behind a 4 mm aperture, at the seat and on a 0.8 mm ring around it: the settings
@@ -119,6 +122,7 @@ impl Baseline {
                 near_pupil_ring_mm: e.near_pupil_ring_mm,
                 decoy_weight: e.decoy_weight,
                 head_radius_mm: e.head_radius_mm,
+                head_positions: e.head_positions,
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: e.camera_focus_d.to_vec(),
@@ -389,6 +393,26 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 2, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
             head_radius_mm: 0.3,
             leak_weight: 2.0,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_focus_d: &[-1.0, 0.0, 2.0],
+            ..CAMERA_RING
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 2, target at 8 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_radius_mm: 0.3,
+            head_positions: 8,
+            leak_weight: 2.0,
+            near_pupil: 6,
+            near_pupil_ring_mm: 0.8,
+            camera_focus_d: &[-1.0, 0.0, 2.0],
+            ..CAMERA_RING
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 8 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_radius_mm: 0.3,
+            head_positions: 8,
+            leak_weight: 3.0,
             near_pupil: 6,
             near_pupil_ring_mm: 0.8,
             camera_focus_d: &[-1.0, 0.0, 2.0],
@@ -738,19 +762,53 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             true,
         ),
     ];
+    // The same at leak weight 2 and 3 with the target at 8 positions on its ring instead of 4.
+    let with_eight_stacked = [
+        (
+            "the same with leak penalty 2 and the target at 8 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            2.0,
+            true,
+        ),
+        (
+            "the same with leak penalty 3 and the target at 8 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+            true,
+        ),
+    ];
     let rows = without_near_pupil
         .into_iter()
-        .map(|row| (row, 0, 0.0, &[][..]))
-        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0, &[][..])))
-        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8, &[][..])))
-        .chain(with_camera_ring.into_iter().map(|row| (row, 6, 0.0, &[0.0, 2.0][..])))
+        .map(|row| (row, 0, 0.0, &[][..], 4))
+        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0, &[][..], 4)))
+        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8, &[][..], 4)))
+        .chain(
+            with_camera_ring
+                .into_iter()
+                .map(|row| (row, 6, 0.0, &[0.0, 2.0][..], 4)),
+        )
         .chain(
             with_both_rings
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..])),
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 4)),
+        )
+        .chain(
+            with_eight_stacked
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 8)),
         );
-    // The last element: the focus settings of camera decoys also on a 0.8 mm ring (empty: no such ring).
-    for ((label, head_radius_mm, method, leak_weight, cameras), near_pupil, near_pupil_ring_mm, camera_ring) in rows {
+    // The last two elements: the focus settings of camera decoys also on a 0.8 mm ring (empty: no such ring),
+    // and the target's positions on its ring.
+    for (
+        (label, head_radius_mm, method, leak_weight, cameras),
+        near_pupil,
+        near_pupil_ring_mm,
+        camera_ring,
+        head_positions,
+    ) in rows
+    {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
             continue;
         }
@@ -763,6 +821,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             cameras,
             near_pupil,
             near_pupil_ring_mm,
+            head_positions,
             ..if camera_ring.is_empty() {
                 BASELINE
             } else {
