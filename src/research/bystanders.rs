@@ -71,6 +71,18 @@ const CAMERA_RING: Encoding = Encoding {
     ..BASELINE
 };
 
+/// The head-box frames closest to every condition at once: the target on a 0.3 mm ring, the defaults' decoys
+/// (leak weight 3), the near-pupil decoys and camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring.
+const BOTH_RINGS: Encoding = Encoding {
+    label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring",
+    head_radius_mm: 0.3,
+    leak_weight: 3.0,
+    near_pupil: 6,
+    near_pupil_ring_mm: 0.8,
+    camera_focus_d: &[-1.0, 0.0, 2.0],
+    ..CAMERA_RING
+};
+
 /// What the experiments share: the wave sweep's lenslet baseline display, its sampled target and PIN slip.
 pub(super) struct Baseline {
     pub(super) display: eyekey_core::physics::display::DisplayGeometry,
@@ -382,41 +394,23 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
-            head_radius_mm: 0.3,
-            leak_weight: 3.0,
-            near_pupil: 6,
-            near_pupil_ring_mm: 0.8,
-            camera_focus_d: &[-1.0, 0.0, 2.0],
-            ..CAMERA_RING
+            ..BOTH_RINGS
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 2, target stacked on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
-            head_radius_mm: 0.3,
             leak_weight: 2.0,
-            near_pupil: 6,
-            near_pupil_ring_mm: 0.8,
-            camera_focus_d: &[-1.0, 0.0, 2.0],
-            ..CAMERA_RING
+            ..BOTH_RINGS
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 2, target at 8 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
-            head_radius_mm: 0.3,
             head_positions: 8,
             leak_weight: 2.0,
-            near_pupil: 6,
-            near_pupil_ring_mm: 0.8,
-            camera_focus_d: &[-1.0, 0.0, 2.0],
-            ..CAMERA_RING
+            ..BOTH_RINGS
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 8 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
-            head_radius_mm: 0.3,
             head_positions: 8,
-            leak_weight: 3.0,
-            near_pupil: 6,
-            near_pupil_ring_mm: 0.8,
-            camera_focus_d: &[-1.0, 0.0, 2.0],
-            ..CAMERA_RING
+            ..BOTH_RINGS
         },
         Encoding {
             label: "the defaults (6 near-pupil decoys), leak penalty 12, target stacked on a 0.3 mm ring (a tracked head box)",
