@@ -45,6 +45,7 @@ fn r6_alpha() -> [f64; SUB_RAY_DIMS] {
 /// one block fill the cube evenly, so the kernel's sampling noise falls faster than with independent draws
 /// ([`SubRaySequence::Independent`], SplitMix64).
 pub(crate) struct SubRayDraws {
+    alpha: [f64; SUB_RAY_DIMS],
     shift: [f64; SUB_RAY_DIMS],
     n: u64,
     random: Option<SplitMix64>,
@@ -55,7 +56,12 @@ impl SubRayDraws {
         let mut rng = SplitMix64(seed);
         let shift: [f64; SUB_RAY_DIMS] = std::array::from_fn(|_| rng.next_f64());
         let random = (sequence == SubRaySequence::Independent).then_some(rng);
-        Self { shift, n: 0, random }
+        Self {
+            alpha: r6_alpha(),
+            shift,
+            n: 0,
+            random,
+        }
     }
 
     /// The next sub-ray's six uniforms in [0, 1).
@@ -63,9 +69,8 @@ impl SubRayDraws {
         if let Some(rng) = &mut self.random {
             return std::array::from_fn(|_| rng.next_f64());
         }
-        let alpha = r6_alpha();
         let n = self.n as f64;
         self.n += 1;
-        std::array::from_fn(|i| (self.shift[i] + n * alpha[i]).fract())
+        std::array::from_fn(|i| (self.shift[i] + n * self.alpha[i]).fract())
     }
 }

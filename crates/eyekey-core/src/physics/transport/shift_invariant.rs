@@ -237,6 +237,16 @@ impl Tracer<'_> {
         ]
     }
 
+    /// The sub-ray draws of view `view` from the block (`mx`, `my`) over, seeded from the job's seed, the view
+    /// and the block.
+    fn block_draws(&self, view: u64, mx: i64, my: i64) -> SubRayDraws {
+        let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
+        SubRayDraws::new(
+            self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            self.options.sequence,
+        )
+    }
+
     /// A sub-ray of the view at screen offset `off` through the aperture at the origin, from the block `m`
     /// blocks over, from the first four of its uniforms `r`: its point in the aperture (relative to the
     /// aperture's centre) and where the undiffracted ray meets the pupil plane (mm from the pupil's centre).
@@ -360,11 +370,7 @@ impl Tracer<'_> {
         let mut traced = 0u64;
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
-                let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
-                let mut draws = SubRayDraws::new(
-                    self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-                    self.options.sequence,
-                );
+                let mut draws = self.block_draws(view, mx, my);
                 // Rays in proportion to an upper bound on the block's power in the pupil (from the stray
                 // crossing nearest the pupil's centre), at least 16: every block keeps at least as many rays in
                 // the pupil as draws of the whole pattern would have put there, and each carries its power.
@@ -495,11 +501,7 @@ impl Tracer<'_> {
         // the pattern's density at the angle that reaches it.
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
-                let block = ((mx + 64) as u64) << 8 | (my + 64) as u64;
-                let mut draws = SubRayDraws::new(
-                    self.options.seed ^ (view << 20 | block).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-                    self.options.sequence,
-                );
+                let mut draws = self.block_draws(view, mx, my);
                 for ray in 0..rays as usize {
                     traced += 1;
                     // The last two uniforms (the angle-sampled rays' diffraction angle) are not used: the pupil
