@@ -413,6 +413,23 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             ..BOTH_RINGS
         },
         Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            ..BOTH_RINGS
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 4, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            leak_weight: 4.0,
+            ..BOTH_RINGS
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 6 positions on a 0.3 mm ring, camera decoys at −3, −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            camera_focus_d: &[-3.0, -1.0, 0.0, 2.0],
+            ..BOTH_RINGS
+        },
+        Encoding {
             label: "the defaults (6 near-pupil decoys), leak penalty 12, target stacked on a 0.3 mm ring (a tracked head box)",
             head_radius_mm: 0.3,
             leak_weight: 12.0,
@@ -773,6 +790,31 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             true,
         ),
     ];
+    // Between the two: the target at 6 positions on its ring, at leak weight 3 and 4.
+    let with_six_stacked = [
+        (
+            "the same with leak penalty 3 and the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.0,
+            true,
+        ),
+        (
+            "the same with leak penalty 4 and the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            4.0,
+            true,
+        ),
+    ];
+    // The same with camera decoys at −3 D as well (a camera at −3 D read those frames 14.4 mm left).
+    let with_six_stacked_far_focus = [(
+        "the same with leak penalty 3, the target at 6 positions on its 0.3 mm ring and camera decoys at −3, −1, 0, +2 D (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        true,
+    )];
     let rows = without_near_pupil
         .into_iter()
         .map(|row| (row, 0, 0.0, &[][..], 4))
@@ -792,6 +834,16 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             with_eight_stacked
                 .into_iter()
                 .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 8)),
+        )
+        .chain(
+            with_six_stacked
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6)),
+        )
+        .chain(
+            with_six_stacked_far_focus
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[-3.0, -1.0, 0.0, 2.0][..], 6)),
         );
     // The last two elements: the focus settings of camera decoys also on a 0.8 mm ring (empty: no such ring),
     // and the target's positions on its ring.

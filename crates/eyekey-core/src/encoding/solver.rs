@@ -1,7 +1,10 @@
 //! Box-constrained minimisation (paper Eq. 15: 0 ≤ L ≤ L_max) for 10⁶ unknowns and more.
 //!
 //! FISTA (Beck & Teboulle 2009) with gradient-based adaptive restart (O'Donoghue & Candès 2015) and a step
-//! 1/L from a power-iteration estimate of the gradient's Lipschitz constant. Hand-written: the generic
+//! 1/L from a power-iteration estimate of the gradient's Lipschitz constant, by default in a diagonal metric:
+//! unknown i steps s_i/L_S, s_i the inverse of its curvature row sum (a separable surrogate, De Pierro 1995)
+//! and L_S the Lipschitz constant of S^½ H S^½, so that unknowns few observers see (small curvature) are not
+//! held to the step of the most-seen ones. Hand-written: the generic
 //! crates either lack box constraints at this scale or allocate per iteration. For the non-convex
 //! difference-maximisation objective the same L bounds the curvature from above (its extra terms are
 //! concave), so each projected-gradient step still decreases the objective; a step whose objective rises
@@ -96,6 +99,9 @@ pub struct SolverOptions {
     pub power_iterations: u32,
     /// A known Lipschitz constant (skips the power iteration).
     pub lipschitz: Option<f64>,
+    /// Scale each unknown's step by the inverse of its curvature row sum (a diagonal, Jacobi-like metric; see
+    /// [`jacobi_scales`]); without it every unknown takes the step 1/L.
+    pub preconditioned: bool,
 }
 
 impl Default for SolverOptions {
@@ -106,6 +112,7 @@ impl Default for SolverOptions {
             patience: 5,
             power_iterations: 30,
             lipschitz: None,
+            preconditioned: true,
         }
     }
 }
@@ -133,7 +140,8 @@ pub struct SolveResult {
     pub iterations: u32,
     /// Momentum restarts.
     pub restarts: u32,
-    /// The Lipschitz constant used (step = 1/L).
+    /// The Lipschitz constant used: of the curvature (step 1/L), or of S^½ H S^½ in the diagonal metric (steps
+    /// s_i/L).
     pub lipschitz: f64,
     /// Why it stopped.
     pub termination: Termination,
@@ -177,6 +185,42 @@ pub fn estimate_lipschitz(obj: &dyn Objective, iterations: u32, seed: u64) -> f6
     lambda.abs().max(1e-12) * 1.1
 }
 
+/// The objective seen in the metric of a diagonal preconditioner: x = S^½ z, so its curvature is
+/// S^½ H S^½ (what the power iteration measures when the steps are scaled by S).
+struct Scaled<'a> {
+    inner: &'a dyn Objective,
+    half: Vec<f32>,
+}
+
+impl Objective for Scaled<'_> {
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+    fn value_and_gradient(&self, _: &[f32], _: &mut [f32]) -> f64 {
+        unreachable!("only the curvature of a scaled objective is asked for")
+    }
+    fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
+        let sv: Vec<f32> = v.par_iter().zip(self.half.par_iter()).map(|(v, h)| v * h).collect();
+        self.inner.curvature_product(&sv, out);
+        out.par_iter_mut().zip(self.half.par_iter()).for_each(|(o, h)| *o *= h);
+    }
+}
+
+/// The separable (Jacobi-like) step scales of a diagonal preconditioner: s_i = 1/Σ_j |H_ij| when H has
+/// non-negative entries, estimated as 1/(H·1)_i (De Pierro 1995's separable surrogate; Fessler's SPS), with
+/// each row sum floored at 10⁻³ of the largest so that unknowns nobody sees do not take unbounded steps.
+/// The step of unknown i is s_i / L_S, L_S the Lipschitz constant of S^½ H S^½ measured by power iteration, so
+/// a wrong row sum costs speed, never convergence.
+pub fn jacobi_scales(obj: &dyn Objective) -> Vec<f32> {
+    let n = obj.dim();
+    let ones = vec![1f32; n];
+    let mut d = vec![0f32; n];
+    obj.curvature_product(&ones, &mut d);
+    let top = d.par_iter().map(|v| v.abs()).reduce(|| 0.0, f32::max);
+    let floor = (top * 1e-3).max(f32::MIN_POSITIVE);
+    d.par_iter().map(|v| 1.0 / v.max(floor)).collect()
+}
+
 /// Minimises `obj` over lower ≤ x ≤ upper from the warm start `x0`.
 ///
 /// `progress` is called after every iteration; `cancel` is checked before every iteration.
@@ -192,10 +236,22 @@ pub fn minimise(
     let start = Instant::now();
     let n = obj.dim();
     assert_eq!(x0.len(), n, "warm start length");
-    let lipschitz = options
-        .lipschitz
-        .unwrap_or_else(|| estimate_lipschitz(obj, options.power_iterations, 12345));
-    let step = (1.0 / lipschitz) as f32;
+    // Per-unknown steps: 1/L everywhere, or s_i/L_S in a diagonal metric (the box projection is still a clamp,
+    // the metric being diagonal).
+    let (lipschitz, steps) = if options.preconditioned {
+        let scales = jacobi_scales(obj);
+        let half = scales.par_iter().map(|s| s.sqrt()).collect();
+        let l = options
+            .lipschitz
+            .unwrap_or_else(|| estimate_lipschitz(&Scaled { inner: obj, half }, options.power_iterations, 12345));
+        let inv = (1.0 / l) as f32;
+        (l, scales.into_par_iter().map(|s| s * inv).collect::<Vec<f32>>())
+    } else {
+        let l = options
+            .lipschitz
+            .unwrap_or_else(|| estimate_lipschitz(obj, options.power_iterations, 12345));
+        (l, vec![(1.0 / l) as f32; n])
+    };
     let project = |v: f32| v.clamp(lower, upper);
     let mut x: Vec<f32> = x0.into_par_iter().map(project).collect();
     let mut y = x.clone();
@@ -218,8 +274,8 @@ pub fn minimise(
         // Projected gradient step from the extrapolated point y.
         x_new
             .par_iter_mut()
-            .zip(y.par_iter().zip(grad.par_iter()))
-            .for_each(|(xn, (yi, gi))| *xn = project(yi - step * gi));
+            .zip(y.par_iter().zip(grad.par_iter().zip(steps.par_iter())))
+            .for_each(|(xn, (yi, (gi, step)))| *xn = project(yi - step * gi));
         // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded.
         let uphill = directional(&grad, &x_new, &x);
         let monotone_break = f_y > f_x * (1.0 + 1e-12) && t > 1.0;
@@ -362,11 +418,18 @@ mod tests {
 
     #[test]
     fn kkt_conditions_hold_and_an_independent_solver_agrees() {
+        for preconditioned in [false, true] {
+            kkt_and_agreement(preconditioned);
+        }
+    }
+
+    fn kkt_and_agreement(preconditioned: bool) {
         let p = problem(40, 25, 3);
         let opts = SolverOptions {
             max_iterations: 20000,
             tolerance: 1e-12,
             patience: 20,
+            preconditioned,
             ..Default::default()
         };
         let r = minimise(&p, vec![0.5; 25], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false));
@@ -393,6 +456,63 @@ mod tests {
         }
         // Some bounds are active, so the box mattered.
         assert!(r.x.iter().any(|v| *v == 0.0 || *v == 1.0));
+    }
+
+    /// A non-negative least-squares problem whose columns differ in scale by 100×, as a light field's unknowns do
+    /// (views seen by the target, by decoys only, by nobody).
+    fn badly_scaled(rows: usize, cols: usize, seed: u64) -> DenseLs {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let scale: Vec<f64> = (0..cols).map(|j| 100f64.powf(j as f64 / (cols - 1) as f64)).collect();
+        let m = (0..rows)
+            .map(|_| scale.iter().map(|s| s * rng.gen::<f64>()).collect())
+            .collect();
+        let b = (0..rows).map(|_| 30.0 * rng.gen::<f64>()).collect();
+        DenseLs { m, b }
+    }
+
+    #[test]
+    fn jacobi_scales_are_the_inverse_curvature_row_sums() {
+        // H = 2MᵀM for ‖Mx − b‖²; its row sums by hand, in f64.
+        let p = badly_scaled(8, 5, 2);
+        let s = jacobi_scales(&p);
+        let top = (0..5)
+            .map(|i| {
+                (0..5)
+                    .map(|j| 2.0 * p.m.iter().map(|row| row[i] * row[j]).sum::<f64>())
+                    .sum::<f64>()
+            })
+            .collect::<Vec<f64>>();
+        for (si, d) in s.iter().zip(&top) {
+            assert!((*si as f64 * d - 1.0).abs() < 1e-4, "{si} vs 1/{d}");
+        }
+    }
+
+    #[test]
+    fn the_diagonal_metric_reaches_the_optimum_in_fewer_iterations_on_a_badly_scaled_problem() {
+        let p = badly_scaled(80, 40, 7);
+        let run = |preconditioned| {
+            let opts = SolverOptions {
+                max_iterations: 20000,
+                tolerance: 1e-12,
+                patience: 20,
+                preconditioned,
+                ..Default::default()
+            };
+            minimise(&p, vec![0.0; 40], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false))
+        };
+        let (plain, scaled) = (run(false), run(true));
+        let f_star = plain.objective.min(scaled.objective);
+        assert!(
+            (plain.objective - scaled.objective).abs() <= 1e-5 * f_star,
+            "{} vs {}",
+            plain.objective,
+            scaled.objective
+        );
+        let reached = |h: &[f64]| h.iter().position(|f| *f <= f_star * (1.0 + 1e-4)).expect("reached");
+        let (a, b) = (reached(&plain.history), reached(&scaled.history));
+        // Both in the box's interior and on its faces: the box mattered.
+        assert!(scaled.x.iter().any(|v| *v == 0.0 || *v == 1.0));
+        assert!(b * 3 <= a, "plain {a} iterations, preconditioned {b}");
     }
 
     #[test]
