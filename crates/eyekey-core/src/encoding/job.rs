@@ -69,7 +69,7 @@ pub struct SolverSummary {
     pub objective: f64,
     /// The objective after every iteration of every round.
     pub objective_history: Vec<f64>,
-    /// The last round's Lipschitz constant (of S^½ H S^½ in the solver's diagonal metric: steps s_i/L).
+    /// The last round's Lipschitz constant (step = 1/L).
     pub lipschitz: f64,
     /// Solver wall time over all rounds, seconds.
     pub seconds: f64,

@@ -56,8 +56,7 @@ pub fn encode(
         reference = reference.with_known_font(attacker);
     }
     let mut summary = SolverSummary {
-        algorithm:
-            "FISTA with gradient restart, steps s_i/L in a diagonal metric (curvature row sums, power iteration)".into(),
+        algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
         iterations: 0,
         restarts: 0,
         termination: Termination::MaxIterations,

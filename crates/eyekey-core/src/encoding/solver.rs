@@ -1,11 +1,11 @@
 //! Box-constrained minimisation (paper Eq. 15: 0 ≤ L ≤ L_max) for 10⁶ unknowns and more.
 //!
 //! FISTA (Beck & Teboulle 2009) with gradient-based adaptive restart (O'Donoghue & Candès 2015) and a step
-//! 1/L from a power-iteration estimate of the gradient's Lipschitz constant, by default in a diagonal metric:
-//! unknown i steps s_i/L_S, s_i the inverse of its curvature row sum (a separable surrogate, De Pierro 1995)
-//! and L_S the Lipschitz constant of S^½ H S^½, so that unknowns few observers see (small curvature) are not
-//! held to the step of the most-seen ones. Hand-written: the generic
-//! crates either lack box constraints at this scale or allocate per iteration. For the non-convex
+//! 1/L from a power-iteration estimate of the gradient's Lipschitz constant; optionally
+//! ([`SolverOptions::preconditioned`]) in a diagonal metric: unknown i steps s_i/L_S, s_i the inverse of its
+//! curvature row sum (a separable surrogate, De Pierro 1995) and L_S the Lipschitz constant of S^½ H S^½, so that
+//! unknowns few observers see (small curvature) are not held to the step of the most-seen ones. Hand-written:
+//! the generic crates either lack box constraints at this scale or allocate per iteration. For the non-convex
 //! difference-maximisation objective the same L bounds the curvature from above (its extra terms are
 //! concave), so each projected-gradient step still decreases the objective; a step whose objective rises
 //! is undone and the momentum reset, which keeps the method monotone.
@@ -112,7 +112,7 @@ impl Default for SolverOptions {
             patience: 5,
             power_iterations: 30,
             lipschitz: None,
-            preconditioned: true,
+            preconditioned: false,
         }
     }
 }
