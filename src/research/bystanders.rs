@@ -232,7 +232,7 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
             .unwrap_or_else(|| "–".into());
         writeln!(
             md,
-            "| ({}, {}, {}) | {} mm | {:.2} | {} of {} | {} | {} of {} | {} |",
+            "| ({}, {}, {}) | {} mm | {:.2} | {} of {} | {} | {} of {}{} | {} |",
             signed_mm(p.eye.x_mm),
             signed_mm(p.eye.y_mm),
             signed_mm(p.eye.dz_mm),
@@ -243,6 +243,11 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
             score_cell(p.best_person.as_ref()),
             p.camera_settings_read,
             p.camera_settings,
+            if p.camera_settings_that_read.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", p.camera_settings_that_read.join("; "))
+            },
             cam
         )?;
     }

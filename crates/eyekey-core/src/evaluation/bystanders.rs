@@ -121,6 +121,9 @@ pub struct BystanderPosition {
     pub camera_settings_read: u32,
     /// Camera settings tried.
     pub camera_settings: u32,
+    /// The settings that read (focus, aperture, channel), in the sweep's order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub camera_settings_that_read: Vec<String>,
 }
 
 /// Everybody who looked from elsewhere.

@@ -398,6 +398,7 @@ impl Evaluator<'_> {
                 }
             }
             let (mut best_camera, mut camera_read, mut settings) = (None::<ViewScore>, 0, 0);
+            let mut readers = Vec::new();
             self.camera_sweep(
                 eye,
                 &bo.camera_focus_d,
@@ -406,6 +407,9 @@ impl Evaluator<'_> {
                     let s = self.score_bystander(&format!("camera {at} {setting}"), lum, white, grid, eye);
                     settings += 1;
                     camera_read += u32::from(s.readable);
+                    if s.readable {
+                        readers.push(setting.to_string());
+                    }
                     if best_camera.as_ref().is_none_or(|b| s.legibility > b.legibility) {
                         best_camera = Some(s);
                     }
@@ -426,6 +430,7 @@ impl Evaluator<'_> {
                 best_camera,
                 camera_settings_read: camera_read,
                 camera_settings: settings,
+                camera_settings_that_read: readers,
             });
             progress((k + 1) as f64 / n as f64);
         }
@@ -498,6 +503,16 @@ mod tests {
         assert_eq!(b.positions.len(), 8);
         assert_eq!(b.nearest_reader_mm, Some(repeat), "{:#?}", b.positions);
         for p in &b.positions {
+            // The settings that read are named, one for each counted, from the settings tried.
+            assert_eq!(
+                p.camera_settings_that_read.len(),
+                p.camera_settings_read as usize,
+                "{p:#?}"
+            );
+            assert!(
+                p.camera_settings_that_read.iter().all(|s| s.contains("aperture=4mm")),
+                "{p:#?}"
+            );
             if p.distance_mm == repeat {
                 assert_eq!(p.people_read, 1, "{p:#?}");
                 assert!(p.relative_light > 0.5, "{p:#?}");
