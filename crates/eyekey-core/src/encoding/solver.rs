@@ -236,8 +236,8 @@ pub fn minimise(
     let start = Instant::now();
     let n = obj.dim();
     assert_eq!(x0.len(), n, "warm start length");
-    // Per-unknown steps: 1/L everywhere, or s_i/L_S in a diagonal metric (the box projection is still a clamp,
-    // the metric being diagonal).
+    // The step: 1/L for every unknown, or s_i/L_S per unknown in a diagonal metric (the box projection is still a
+    // clamp, the metric being diagonal).
     let (lipschitz, steps) = if options.preconditioned {
         let scales = jacobi_scales(obj);
         let half = scales.par_iter().map(|s| s.sqrt()).collect();
@@ -245,13 +245,14 @@ pub fn minimise(
             .lipschitz
             .unwrap_or_else(|| estimate_lipschitz(&Scaled { inner: obj, half }, options.power_iterations, 12345));
         let inv = (1.0 / l) as f32;
-        (l, scales.into_par_iter().map(|s| s * inv).collect::<Vec<f32>>())
+        (l, Some(scales.into_par_iter().map(|s| s * inv).collect::<Vec<f32>>()))
     } else {
         let l = options
             .lipschitz
             .unwrap_or_else(|| estimate_lipschitz(obj, options.power_iterations, 12345));
-        (l, vec![(1.0 / l) as f32; n])
+        (l, None)
     };
+    let step = (1.0 / lipschitz) as f32;
     let project = |v: f32| v.clamp(lower, upper);
     let mut x: Vec<f32> = x0.into_par_iter().map(project).collect();
     let mut y = x.clone();
@@ -272,10 +273,16 @@ pub fn minimise(
             break;
         }
         // Projected gradient step from the extrapolated point y.
-        x_new
-            .par_iter_mut()
-            .zip(y.par_iter().zip(grad.par_iter().zip(steps.par_iter())))
-            .for_each(|(xn, (yi, (gi, step)))| *xn = project(yi - step * gi));
+        match &steps {
+            Some(steps) => x_new
+                .par_iter_mut()
+                .zip(y.par_iter().zip(grad.par_iter().zip(steps.par_iter())))
+                .for_each(|(xn, (yi, (gi, step)))| *xn = project(yi - step * gi)),
+            None => x_new
+                .par_iter_mut()
+                .zip(y.par_iter().zip(grad.par_iter()))
+                .for_each(|(xn, (yi, gi))| *xn = project(yi - step * gi)),
+        }
         // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded.
         let uphill = directional(&grad, &x_new, &x);
         let monotone_break = f_y > f_x * (1.0 + 1e-12) && t > 1.0;
