@@ -430,15 +430,20 @@ mod tests {
         }
     }
 
-    fn kkt_and_agreement(preconditioned: bool) {
-        let p = problem(40, 25, 3);
-        let opts = SolverOptions {
+    /// Options that run a small problem to full convergence, in either metric.
+    fn to_convergence(preconditioned: bool) -> SolverOptions {
+        SolverOptions {
             max_iterations: 20000,
             tolerance: 1e-12,
             patience: 20,
             preconditioned,
             ..Default::default()
-        };
+        }
+    }
+
+    fn kkt_and_agreement(preconditioned: bool) {
+        let p = problem(40, 25, 3);
+        let opts = to_convergence(preconditioned);
         let r = minimise(&p, vec![0.5; 25], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false));
         // f32 iterates: first-order conditions to 1e-3 of the gradient scale.
         assert!(
@@ -498,13 +503,7 @@ mod tests {
     fn the_diagonal_metric_reaches_the_optimum_in_fewer_iterations_on_a_badly_scaled_problem() {
         let p = badly_scaled(80, 40, 7);
         let run = |preconditioned| {
-            let opts = SolverOptions {
-                max_iterations: 20000,
-                tolerance: 1e-12,
-                patience: 20,
-                preconditioned,
-                ..Default::default()
-            };
+            let opts = to_convergence(preconditioned);
             minimise(&p, vec![0.0; 40], 0.0, 1.0, &opts, &mut |_| {}, &AtomicBool::new(false))
         };
         let (plain, scaled) = (run(false), run(true));
