@@ -423,6 +423,12 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             ..BOTH_RINGS
         },
         Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (8 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            camera_aperture_mm: 8.0,
+            ..BOTH_RINGS
+        },
+        Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 3.5, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
             head_positions: 6,
             leak_weight: 3.5,
@@ -848,43 +854,65 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         3.0,
         true,
     )];
+    // The same with the camera decoys behind 8 mm instead of 4 mm (the camera that read the 6-position frames
+    // 14.4 mm left was at 8 mm).
+    let with_six_stacked_wide_camera_decoys = [(
+        "the same with leak penalty 3, the target at 6 positions on its 0.3 mm ring and camera decoys behind 8 mm (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        true,
+    )];
     let rows = without_near_pupil
         .into_iter()
-        .map(|row| (row, 0, 0.0, &[][..], 4, 0.8))
-        .chain(with_near_pupil.into_iter().map(|row| (row, 6, 0.0, &[][..], 4, 0.8)))
-        .chain(with_seat_ring.into_iter().map(|row| (row, 6, 0.8, &[][..], 4, 0.8)))
+        .map(|row| (row, 0, 0.0, &[][..], 4, 0.8, 4.0))
+        .chain(
+            with_near_pupil
+                .into_iter()
+                .map(|row| (row, 6, 0.0, &[][..], 4, 0.8, 4.0)),
+        )
+        .chain(
+            with_seat_ring
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[][..], 4, 0.8, 4.0)),
+        )
         .chain(
             with_camera_ring
                 .into_iter()
-                .map(|row| (row, 6, 0.0, &[0.0, 2.0][..], 4, 0.8)),
+                .map(|row| (row, 6, 0.0, &[0.0, 2.0][..], 4, 0.8, 4.0)),
         )
         .chain(
             with_both_rings
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 4, 0.8)),
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 4, 0.8, 4.0)),
         )
         .chain(
             with_eight_stacked
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 8, 0.8)),
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 8, 0.8, 4.0)),
         )
         .chain(
             with_six_stacked
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 0.8)),
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 0.8, 4.0)),
         )
         .chain(
             with_six_stacked_far_focus
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-3.0, -1.0, 0.0, 2.0][..], 6, 0.8)),
+                .map(|row| (row, 6, 0.8, &[-3.0, -1.0, 0.0, 2.0][..], 6, 0.8, 4.0)),
         )
         .chain(
             with_six_stacked_wider_camera_ring
                 .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 1.2)),
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 1.2, 4.0)),
+        )
+        .chain(
+            with_six_stacked_wide_camera_decoys
+                .into_iter()
+                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 0.8, 8.0)),
         );
-    // The last three elements: the focus settings of camera decoys also on a ring (empty: no such ring), the
-    // target's positions on its ring and the camera decoys' ring radius.
+    // The last four elements: the focus settings of camera decoys also on a ring (empty: no such ring), the
+    // target's positions on its ring, the camera decoys' ring radius and their aperture.
     for (
         (label, head_radius_mm, method, leak_weight, cameras),
         near_pupil,
@@ -892,6 +920,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         camera_ring,
         head_positions,
         camera_ring_mm,
+        camera_aperture_mm,
     ) in rows
     {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
@@ -913,6 +942,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
                 Encoding {
                     camera_focus_d: camera_ring,
                     camera_ring_mm,
+                    camera_aperture_mm,
                     ..CAMERA_RING
                 }
             }
