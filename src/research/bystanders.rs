@@ -550,6 +550,10 @@ pub(super) enum HeadBoxMethod {
     Tracked,
 }
 
+/// One head-box experiment row: label, the target's ring radius (mm), how the frames are served, the leak weight,
+/// whether camera decoys look from the seat.
+type HeadBoxRow = (&'static str, f64, HeadBoxMethod, f64, bool);
+
 /// The target's worst reading on rings of `offsets` around the design position (right, left, up, down): the
 /// lowest legibility and how many of the ring's positions the known-font attacker read.
 pub(super) fn head_rings(
@@ -863,56 +867,37 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         3.0,
         true,
     )];
-    let rows = without_near_pupil
+    // Each group of rows with what its rows share: near-pupil decoys and their ring around the seat, the focus
+    // settings of camera decoys also on a ring (empty: no such ring), the target's positions on its ring, the
+    // camera decoys' ring radius and their aperture.
+    type Shared = (u32, f64, &'static [f64], u32, f64, f64);
+    let groups: [(&[HeadBoxRow], Shared); 10] = [
+        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, 4.0)),
+        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, 4.0)),
+        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, 4.0)),
+        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, 4.0)),
+        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, 4.0)),
+        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, 4.0)),
+        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, 4.0)),
+        (
+            &with_six_stacked_far_focus,
+            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, 4.0),
+        ),
+        (
+            &with_six_stacked_wider_camera_ring,
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, 4.0),
+        ),
+        (
+            &with_six_stacked_wide_camera_decoys,
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, 8.0),
+        ),
+    ];
+    let rows = groups
         .into_iter()
-        .map(|row| (row, 0, 0.0, &[][..], 4, 0.8, 4.0))
-        .chain(
-            with_near_pupil
-                .into_iter()
-                .map(|row| (row, 6, 0.0, &[][..], 4, 0.8, 4.0)),
-        )
-        .chain(
-            with_seat_ring
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[][..], 4, 0.8, 4.0)),
-        )
-        .chain(
-            with_camera_ring
-                .into_iter()
-                .map(|row| (row, 6, 0.0, &[0.0, 2.0][..], 4, 0.8, 4.0)),
-        )
-        .chain(
-            with_both_rings
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 4, 0.8, 4.0)),
-        )
-        .chain(
-            with_eight_stacked
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 8, 0.8, 4.0)),
-        )
-        .chain(
-            with_six_stacked
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 0.8, 4.0)),
-        )
-        .chain(
-            with_six_stacked_far_focus
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-3.0, -1.0, 0.0, 2.0][..], 6, 0.8, 4.0)),
-        )
-        .chain(
-            with_six_stacked_wider_camera_ring
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 1.2, 4.0)),
-        )
-        .chain(
-            with_six_stacked_wide_camera_decoys
-                .into_iter()
-                .map(|row| (row, 6, 0.8, &[-1.0, 0.0, 2.0][..], 6, 0.8, 8.0)),
-        );
-    // The last four elements: the focus settings of camera decoys also on a ring (empty: no such ring), the
-    // target's positions on its ring, the camera decoys' ring radius and their aperture.
+        .flat_map(|(rows, (np, np_ring, focus, positions, ring, aperture))| {
+            rows.iter()
+                .map(move |&row| (row, np, np_ring, focus, positions, ring, aperture))
+        });
     for (
         (label, head_radius_mm, method, leak_weight, cameras),
         near_pupil,
