@@ -429,6 +429,12 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             ..BOTH_RINGS
         },
         Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 3.75, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            leak_weight: 3.75,
+            ..BOTH_RINGS
+        },
+        Encoding {
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), leak penalty 3.5, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
             head_positions: 6,
             leak_weight: 3.5,
@@ -817,7 +823,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             true,
         ),
     ];
-    // Between the two: the target at 6 positions on its ring, at leak weight 3, 4 and 3.5.
+    // Between the two: the target at 6 positions on its ring, at leak weight 3, 4, 3.5 and 3.75.
     let with_six_stacked = [
         (
             "the same with leak penalty 3 and the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
@@ -838,6 +844,13 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
             0.3,
             HeadBoxMethod::Tracked,
             3.5,
+            true,
+        ),
+        (
+            "the same with leak penalty 3.75 and the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+            0.3,
+            HeadBoxMethod::Tracked,
+            3.75,
             true,
         ),
     ];
