@@ -57,7 +57,7 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
         0
     };
     let cameras = if options.camera_decoys {
-        let positions = if options.camera_decoy_ring_mm > 0.0 { 5 } else { 1 };
+        let positions = super::pipeline::camera_decoy_positions(options).len() as u64;
         options.camera_decoy_focus_d.len() as u64 * display.n_bands() as u64 * positions
     } else {
         0

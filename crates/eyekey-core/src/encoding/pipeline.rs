@@ -509,20 +509,30 @@ fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Obse
         .collect()
 }
 
-/// Camera decoys: an ideal lens (`camera_decoy_aperture_mm`) at each `camera_decoy_focus_d` behind each one-band
-/// filter, at the target's position and, with `camera_decoy_ring_mm`, on a ring around it.
-fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
-    let d = &spec.display;
-    let o = &spec.options;
+/// Where the camera decoys look from: the target's position and, with `camera_decoy_ring_mm`, four positions on
+/// a ring around it (what the admission footprint counts too).
+pub(crate) fn camera_decoy_positions(o: &EncodeOptions) -> Vec<EyePosition> {
     let mut positions = vec![EyePosition::default()];
     if o.camera_decoy_ring_mm > 0.0 {
         positions.extend(ring(o.camera_decoy_ring_mm, 4));
     }
+    positions
+}
+
+/// Camera decoys: an ideal lens (`camera_decoy_aperture_mm`) at each `camera_decoy_focus_d` behind each one-band
+/// filter, from each of [`camera_decoy_positions`].
+fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
+    let d = &spec.display;
+    let o = &spec.options;
+    let lenses: Vec<_> = o
+        .camera_decoy_focus_d
+        .iter()
+        .map(|&focus| camera_lens(focus, o.camera_decoy_aperture_mm))
+        .collect();
     let mut out = Vec::new();
-    for eye in positions {
-        for &focus in &o.camera_decoy_focus_d {
-            let lens = camera_lens(focus, o.camera_decoy_aperture_mm);
-            let transports = transports(d, Lens::Achromat(&lens), eye, &base_transport(o), o.optics, cache)
+    for eye in camera_decoy_positions(o) {
+        for lens in &lenses {
+            let transports = transports(d, Lens::Achromat(lens), eye, &base_transport(o), o.optics, cache)
                 .map_err(|e| PipelineError::invalid("display", e.to_string()))?;
             out.extend(one_band_observers(transports, d));
         }
