@@ -688,9 +688,16 @@ impl StencilOperator {
             .for_each(|(j, rows)| {
                 for y in 0..ny {
                     let frame = &l[(y * self.views_v + j) * frame_w * n_bands..][..frame_w * n_bands];
-                    for x in 0..nx {
-                        for i in 0..nu {
-                            rows[(i * ny + y) * row_len + pad + x] = frame[(x * nu + i) * n_bands + band];
+                    // View by view, each destination row written in order: writing the U views' rows side by
+                    // side would step `ny·row_len` floats between them, often a multiple of 4 KiB, and their
+                    // streams would evict one another from the same cache sets.
+                    for i in 0..nu {
+                        let dst = &mut rows[(i * ny + y) * row_len + pad..][..nx];
+                        for (d, s) in dst
+                            .iter_mut()
+                            .zip(frame[i * n_bands + band..].iter().step_by(nu * n_bands))
+                        {
+                            *d = *s;
                         }
                     }
                 }
@@ -710,10 +717,13 @@ impl StencilOperator {
                 let mut acc = vec![0f32; n_rows * k * nx_blocks];
                 pass.forward_rows((chunk * rows_per_task) as i64, &mut acc);
                 for (out_row, acc) in rows.chunks_exact_mut(width * 3).zip(acc.chunks_exact(k * nx_blocks)) {
-                    for (g, o) in out_row.chunks_exact_mut(3).enumerate() {
-                        let value = acc[(g % k) * nx_blocks + g / k];
-                        for (slot, ca) in o.iter_mut().zip(c) {
-                            *slot = if accumulate { *slot + ca * value } else { ca * value };
+                    // Retinal pixel g = x·k + φ is hole x's phase φ: one pass per phase, without dividing.
+                    for (phase, acc) in acc.chunks_exact(nx_blocks).enumerate() {
+                        let pixels = out_row[phase * 3..].chunks_mut(3).step_by(k);
+                        for (o, value) in pixels.zip(&acc[..nx]) {
+                            for (slot, ca) in o.iter_mut().zip(c) {
+                                *slot = if accumulate { *slot + ca * value } else { ca * value };
+                            }
                         }
                     }
                 }
@@ -744,9 +754,13 @@ impl StencilOperator {
         // ỹ = Σ_a c_a y_a as one padded row per (retinal row, phase).
         let mut source = vec![0f32; ny * k * k * row_len];
         source.par_chunks_mut(k * row_len).enumerate().for_each(|(gy, rows)| {
-            for g in 0..width {
-                let px = &y[(gy * width + g) * 3..(gy * width + g) * 3 + 3];
-                rows[(g % k) * row_len + pad + g / k] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+            let image_row = &y[gy * width * 3..(gy + 1) * width * 3];
+            // Retinal pixel g = x·k + φ goes to phase φ's row at hole x: one pass per phase, without dividing.
+            for (phase, row) in rows.chunks_exact_mut(row_len).enumerate() {
+                let pixels = image_row[phase * 3..].chunks(3).step_by(k);
+                for (d, px) in row[pad..pad + nx].iter_mut().zip(pixels) {
+                    *d = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+                }
             }
         });
         let pass = Pass {
