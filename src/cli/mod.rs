@@ -143,6 +143,10 @@ pub enum ExperimentCommand {
         /// Solver iteration cap per encoding.
         #[arg(long, default_value_t = 200)]
         max_iterations: u32,
+        /// Sub-rays per sample of the bystanders' and cameras' kernels (more: nearer the views a real eye or
+        /// lens forms, less Monte Carlo noise; the time grows with them).
+        #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        evaluation_sub_rays: u32,
         /// Only the encodings whose label contains this text.
         #[arg(long)]
         only: Option<String>,
@@ -619,6 +623,7 @@ pub fn run(cli: Cli) -> Result<()> {
             lateral_at_distance,
             camera_apertures,
             max_iterations,
+            evaluation_sub_rays,
             only,
         }) => {
             let bystanders = eyekey_core::evaluation::BystanderOptions {
@@ -631,7 +636,13 @@ pub fn run(cli: Cli) -> Result<()> {
             };
             print!(
                 "{}",
-                crate::research::bystanders::run(&out, bystanders, max_iterations, only.as_deref())?
+                crate::research::bystanders::run(
+                    &out,
+                    bystanders,
+                    max_iterations,
+                    evaluation_sub_rays,
+                    only.as_deref()
+                )?
             );
         }
         Command::Experiment(ExperimentCommand::Headbox {

@@ -256,7 +256,13 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
 
 /// Runs the bystander experiment with `people` sampled people per position; writes `out/bystanders.md`,
 /// `out/bystanders.json` and each encoding's pictures; returns the Markdown.
-pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: Option<&str>) -> Result<String> {
+pub fn run(
+    out: &Path,
+    bystanders: BystanderOptions,
+    max_iterations: u32,
+    sub_rays: u32,
+    only: Option<&str>,
+) -> Result<String> {
     bystanders.validate().map_err(|e| anyhow::anyhow!("bystanders: {e}"))?;
     if bystanders.lateral_mm.is_empty()
         && (bystanders.distances_mm.is_empty() || bystanders.lateral_at_distance_mm.is_empty())
@@ -485,7 +491,7 @@ pub fn run(out: &Path, bystanders: BystanderOptions, max_iterations: u32, only: 
             population: 0,
             optics: Optics::Wave,
             document_text: Some(base.text.clone()),
-            sub_rays: 12,
+            sub_rays,
             key_directions: 0,
             head_offsets_mm: vec![],
             camera_focus_d: bystanders.camera_focus_d.clone(),
