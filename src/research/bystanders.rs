@@ -35,6 +35,8 @@ struct Encoding {
     near_pupil_ring_mm: f64,
     /// The camera decoys' aperture, mm (when `cameras`).
     camera_aperture_mm: f64,
+    /// Further apertures of the camera decoys, mm (`camera_decoy_extra_apertures_mm`).
+    camera_extra_apertures_mm: &'static [f64],
     /// The camera decoys' focus settings, dioptres (when `cameras`).
     camera_focus_d: &'static [f64],
     /// The camera decoys also on a ring of this radius around the seat (`camera_decoy_ring_mm`; 0 = not).
@@ -54,6 +56,7 @@ const BASELINE: Encoding = Encoding {
     near_pupil: 0,
     near_pupil_ring_mm: 0.0,
     camera_aperture_mm: 8.0,
+    camera_extra_apertures_mm: &[],
     camera_focus_d: &[-1.0, 0.0, 1.0],
     camera_ring_mm: 0.0,
     head_positions: 4,
@@ -139,6 +142,7 @@ impl Baseline {
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: e.camera_focus_d.to_vec(),
                 camera_decoy_aperture_mm: e.camera_aperture_mm,
+                camera_decoy_extra_apertures_mm: e.camera_extra_apertures_mm.to_vec(),
                 camera_decoy_ring_mm: e.camera_ring_mm,
                 ..Self::options(max_iterations)
             },
@@ -456,6 +460,12 @@ pub fn run(
             label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 1.2 mm ring (a tracked head box)",
             head_positions: 6,
             camera_ring_mm: 1.2,
+            ..BOTH_RINGS
+        },
+        Encoding {
+            label: "the defaults (6 near-pupil decoys, also on a 0.8 mm ring), target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D behind 4 and 8 mm also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            camera_extra_apertures_mm: &[8.0],
             ..BOTH_RINGS
         },
         Encoding {
@@ -886,29 +896,42 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         3.0,
         true,
     )];
+    // The same with the camera decoys behind both 4 and 8 mm (behind 8 mm alone they left cameras behind 2 mm
+    // reading).
+    let with_six_stacked_two_apertures = [(
+        "the same with leak penalty 3, the target at 6 positions on its 0.3 mm ring and camera decoys behind 4 and 8 mm (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        true,
+    )];
     // Each group of rows with what its rows share: near-pupil decoys and their ring around the seat, the focus
     // settings of camera decoys also on a ring (empty: no such ring), the target's positions on its ring, the
-    // camera decoys' ring radius and their aperture.
-    type Shared = (u32, f64, &'static [f64], u32, f64, f64);
-    let groups: [(&[HeadBoxRow], Shared); 10] = [
-        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, 4.0)),
-        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, 4.0)),
-        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, 4.0)),
-        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, 4.0)),
-        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, 4.0)),
-        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, 4.0)),
-        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, 4.0)),
+    // camera decoys' ring radius and their apertures (the first `camera_decoy_aperture_mm`, the rest extra).
+    type Shared = (u32, f64, &'static [f64], u32, f64, &'static [f64]);
+    let groups: [(&[HeadBoxRow], Shared); 11] = [
+        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, &[4.0])),
+        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, &[4.0])),
+        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, &[4.0])),
+        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, &[4.0])),
+        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, &[4.0])),
+        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, &[4.0])),
+        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0])),
         (
             &with_six_stacked_far_focus,
-            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, 4.0),
+            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, &[4.0]),
         ),
         (
             &with_six_stacked_wider_camera_ring,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, 4.0),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, &[4.0]),
         ),
         (
             &with_six_stacked_wide_camera_decoys,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, 8.0),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[8.0]),
+        ),
+        (
+            &with_six_stacked_two_apertures,
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0, 8.0]),
         ),
     ];
     let rows = groups
@@ -924,7 +947,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         camera_ring,
         head_positions,
         camera_ring_mm,
-        camera_aperture_mm,
+        camera_apertures_mm,
     ) in rows
     {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
@@ -946,7 +969,8 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
                 Encoding {
                     camera_focus_d: camera_ring,
                     camera_ring_mm,
-                    camera_aperture_mm,
+                    camera_aperture_mm: camera_apertures_mm[0],
+                    camera_extra_apertures_mm: &camera_apertures_mm[1..],
                     ..CAMERA_RING
                 }
             }

@@ -58,7 +58,8 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
     };
     let cameras = if options.camera_decoys {
         let positions = super::pipeline::camera_decoy_positions(options).len() as u64;
-        options.camera_decoy_focus_d.len() as u64 * display.n_bands() as u64 * positions
+        let apertures = super::pipeline::camera_decoy_apertures(options).len() as u64;
+        options.camera_decoy_focus_d.len() as u64 * apertures * display.n_bands() as u64 * positions
     } else {
         0
     };

@@ -142,6 +142,11 @@ pub struct EncodeOptions {
     /// Aperture of the camera decoys' lens, mm (2–10).
     #[cfg_attr(feature = "openapi", schema(minimum = 2.0, maximum = 10.0))]
     pub camera_decoy_aperture_mm: f64,
+    /// Further apertures of the camera decoys' lens, mm (at most 3, each 2–10): each at every focus setting and
+    /// position, beside `camera_decoy_aperture_mm`. Decoys behind one aperture hold the cameras of that aperture
+    /// and leave others reading (docs/experiments.md §2c).
+    #[cfg_attr(feature = "openapi", schema(max_items = 3))]
+    pub camera_decoy_extra_apertures_mm: Vec<f64>,
     /// When above 0 (mm): the camera decoys are looked at once more from each of four positions on a ring of
     /// this radius around the target's (right, left, above, below). For frames whose target is stacked on a
     /// ring (`head_radius_mm`): a camera just beside the seat, and at the display's repeats a bystander who sees
@@ -195,6 +200,7 @@ impl Default for EncodeOptions {
             camera_decoys: false,
             camera_decoy_focus_d: vec![-0.5, 0.5],
             camera_decoy_aperture_mm: 6.0,
+            camera_decoy_extra_apertures_mm: vec![],
             camera_decoy_ring_mm: 0.0,
             ensure_target_reads: true,
             target_margin: 0.0,
@@ -297,6 +303,17 @@ impl EncodeOptions {
             return bad(
                 "camera_decoy_aperture_mm",
                 format!("must be within 2..=10 mm, got {}", self.camera_decoy_aperture_mm),
+            );
+        }
+        if self.camera_decoy_extra_apertures_mm.len() > 3
+            || self
+                .camera_decoy_extra_apertures_mm
+                .iter()
+                .any(|a| !(a.is_finite() && (2.0..=10.0).contains(a)))
+        {
+            return bad(
+                "camera_decoy_extra_apertures_mm",
+                "at most 3 further apertures, each within 2..=10 mm".to_string(),
             );
         }
         if let Some(t) = &self.document_text {

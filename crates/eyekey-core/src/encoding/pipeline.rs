@@ -519,15 +519,25 @@ pub(crate) fn camera_decoy_positions(o: &EncodeOptions) -> Vec<EyePosition> {
     positions
 }
 
-/// Camera decoys: an ideal lens (`camera_decoy_aperture_mm`) at each `camera_decoy_focus_d` behind each one-band
-/// filter, from each of [`camera_decoy_positions`].
+/// The camera decoys' apertures, mm: `camera_decoy_aperture_mm` and the extra ones.
+pub(crate) fn camera_decoy_apertures(o: &EncodeOptions) -> Vec<f64> {
+    std::iter::once(o.camera_decoy_aperture_mm)
+        .chain(o.camera_decoy_extra_apertures_mm.iter().copied())
+        .collect()
+}
+
+/// Camera decoys: an ideal lens of each of [`camera_decoy_apertures`] at each `camera_decoy_focus_d` behind each
+/// one-band filter, from each of [`camera_decoy_positions`].
 fn camera_decoys(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let d = &spec.display;
     let o = &spec.options;
-    let lenses: Vec<_> = o
-        .camera_decoy_focus_d
-        .iter()
-        .map(|&focus| camera_lens(focus, o.camera_decoy_aperture_mm))
+    let lenses: Vec<_> = camera_decoy_apertures(o)
+        .into_iter()
+        .flat_map(|aperture| {
+            o.camera_decoy_focus_d
+                .iter()
+                .map(move |&focus| camera_lens(focus, aperture))
+        })
         .collect();
     let mut out = Vec::new();
     for eye in camera_decoy_positions(o) {
@@ -1157,6 +1167,39 @@ mod tests {
         for k in 1..5 {
             let what = format!("ring position {k}");
             assert_views_differ(&spec, &ringed.others[0], &ringed.others[k * bands], &what);
+        }
+    }
+
+    #[test]
+    fn camera_decoys_look_through_every_aperture_asked_for() {
+        // A further aperture adds a decoy per focus, band and position; the footprint counts them, the wider
+        // lens sees other light, and an aperture outside 2-10 mm is refused before anything is built.
+        let options = |extra: Vec<f64>| {
+            move |o: EncodeOptions| EncodeOptions {
+                population_decoys: 0,
+                near_pupil_decoys: 0,
+                camera_decoys: true,
+                camera_decoy_focus_d: vec![1.0],
+                camera_decoy_aperture_mm: 4.0,
+                camera_decoy_extra_apertures_mm: extra.clone(),
+                ..o
+            }
+        };
+        let (cast, spec) = pin_cast(options(vec![8.0]));
+        let bands = spec.display.n_bands();
+        assert_eq!(cast.others.len(), 2 * bands);
+        assert_eq!(
+            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0) as usize,
+            1 + 2 * bands
+        );
+        assert_views_differ(&spec, &cast.others[0], &cast.others[bands], "the 8 mm lens");
+        for bad in [vec![12.0], vec![f64::NAN], vec![4.0; 4]] {
+            let o = options(bad.clone())(EncodeOptions::default());
+            let err = o.validate().expect_err("refused");
+            assert!(
+                err.to_string().contains("camera_decoy_extra_apertures_mm"),
+                "{bad:?}: {err}"
+            );
         }
     }
 }
