@@ -56,7 +56,7 @@ pub fn encode(
         reference = reference.with_known_font(attacker);
     }
     let mut summary = SolverSummary {
-        algorithm: "FISTA with gradient restart, step 1/L (power iteration)".into(),
+        algorithm: "FISTA with gradient restart, step 1/L (Lanczos estimate)".into(),
         iterations: 0,
         restarts: 0,
         termination: Termination::MaxIterations,

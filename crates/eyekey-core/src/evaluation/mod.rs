@@ -32,6 +32,8 @@ pub use report::*;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use rayon::prelude::*;
+
 use image::{Rgb, RgbImage};
 
 use crate::physics::display::DisplayGeometry;
@@ -315,9 +317,16 @@ impl Evaluator<'_> {
         for &r in &options.head_offsets_mm {
             self.check()?;
             let (mut w, mut read) = (f64::INFINITY, true);
-            for eye in head_ring(r) {
-                let o = self.observer(self.target, eye)?;
-                let s = self.reference.score_observer("target moved", &o, self.l).0;
+            // The ring's positions at once: each builds its own kernels, and two at a time keep both cores busy
+            // through the serial parts of each.
+            let scores = head_ring(r)
+                .into_par_iter()
+                .map(|eye| {
+                    let o = self.observer(self.target, eye)?;
+                    Ok(self.reference.score_observer("target moved", &o, self.l).0)
+                })
+                .collect::<Result<Vec<_>, EvaluationError>>()?;
+            for s in scores {
                 w = w.min(s.legibility);
                 read &= s.readable;
             }

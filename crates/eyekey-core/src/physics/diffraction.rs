@@ -148,7 +148,10 @@ pub struct DiffractionSampler {
 /// guide, with the same result as a search of the whole table.
 #[derive(Clone, Debug)]
 struct Cdf {
-    table: Vec<(f64, f64)>,
+    /// The table's x, ascending.
+    xs: Vec<f64>,
+    /// The cumulative value at each x, ascending; held apart from x so that a search touches only these.
+    cs: Vec<f64>,
     guide: Vec<u32>,
     /// The table's first x and entries per unit of x (its grid is uniform in x).
     x0: f64,
@@ -160,19 +163,21 @@ const GUIDE_BUCKETS: usize = 1 << 16;
 
 impl Cdf {
     fn new(table: Vec<(f64, f64)>) -> Self {
+        let (xs, cs): (Vec<f64>, Vec<f64>) = table.into_iter().unzip();
         let guide = (0..=GUIDE_BUCKETS)
             .map(|b| {
                 let u = b as f64 / GUIDE_BUCKETS as f64;
-                table.partition_point(|e| e.1 < u) as u32
+                cs.partition_point(|&c| c < u) as u32
             })
             .collect();
-        let n = table.len() - 1;
-        let (x0, x1) = (table[0].0, table[n].0);
+        let n = xs.len() - 1;
+        let (x0, x1) = (xs[0], xs[n]);
         Self {
             guide,
             x0,
             per_x: n as f64 / (x1 - x0),
-            table,
+            xs,
+            cs,
         }
     }
 
@@ -180,8 +185,8 @@ impl Cdf {
     /// start, 1 past its end), so that inverting it with [`DiffractionSampler::invert`] gives x back.
     #[inline]
     fn at(&self, x: f64) -> f64 {
-        let table = &self.table;
-        let n = table.len() - 1;
+        let cs = &self.cs;
+        let n = cs.len() - 1;
         let f = (x - self.x0) * self.per_x;
         if f.is_nan() || f <= 0.0 {
             return 0.0;
@@ -190,15 +195,16 @@ impl Cdf {
             return 1.0;
         }
         let k = f as usize;
-        let (c0, c1) = (table[k].1, table[k + 1].1);
+        let (c0, c1) = (cs[k], cs[k + 1]);
         c0 + (c1 - c0) * (f - k as f64)
     }
 
-    /// The first index whose cumulative value is ≥ u (`table.len()` if none).
+    /// The first index whose cumulative value is ≥ u (the table's length if none).
+    #[inline]
     fn first_at_least(&self, u: f64) -> usize {
         let b = ((u * GUIDE_BUCKETS as f64) as usize).min(GUIDE_BUCKETS - 1);
         let (lo, hi) = (self.guide[b] as usize, self.guide[b + 1] as usize);
-        lo + self.table[lo..hi].partition_point(|e| e.1 < u)
+        lo + self.cs[lo..hi].partition_point(|&c| c < u)
     }
 }
 
@@ -252,10 +258,10 @@ impl DiffractionSampler {
         }
     }
 
+    #[inline]
     fn invert(cdf: &Cdf, u: f64) -> f64 {
-        let table = &cdf.table;
-        let k = cdf.first_at_least(u).clamp(1, table.len() - 1);
-        let ((x0, c0), (x1, c1)) = (table[k - 1], table[k]);
+        let k = cdf.first_at_least(u).clamp(1, cdf.cs.len() - 1);
+        let ((x0, c0), (x1, c1)) = ((cdf.xs[k - 1], cdf.cs[k - 1]), (cdf.xs[k], cdf.cs[k]));
         if c1 > c0 {
             x0 + (x1 - x0) * (u - c0) / (c1 - c0)
         } else {
@@ -288,8 +294,10 @@ impl DiffractionSampler {
 
     /// A coordinate drawn from `cdf`'s distribution restricted to [lo, hi], with the power it holds (see
     /// [`Self::sinc_coordinate_within`]).
+    #[inline]
     fn draw_within(cdf: &Cdf, lo: f64, hi: f64, u: f64) -> Option<(f64, f64)> {
-        let (c_lo, mass) = (cdf.at(lo), cdf.at(hi) - cdf.at(lo));
+        let c_lo = cdf.at(lo);
+        let mass = cdf.at(hi) - c_lo;
         if mass <= 0.0 {
             return None;
         }
@@ -429,7 +437,7 @@ mod tests {
                     1 => (k % GUIDE_BUCKETS) as f64 / GUIDE_BUCKETS as f64,
                     _ => 1.0 - 1e-12 * k as f64,
                 };
-                assert_eq!(cdf.first_at_least(u), cdf.table.partition_point(|e| e.1 < u), "u = {u}");
+                assert_eq!(cdf.first_at_least(u), cdf.cs.partition_point(|&c| c < u), "u = {u}");
             }
         }
     }
