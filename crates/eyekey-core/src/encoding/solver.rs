@@ -170,6 +170,7 @@ pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64
     let mut state = seed | 1;
     let mut v: Vec<f32> = (0..n)
         .map(|_| {
+            // xorshift: a cheap deterministic start vector with positive entries.
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
