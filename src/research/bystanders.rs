@@ -525,7 +525,7 @@ pub fn run(
         writeln!(md, "### {}\n", e.label)?;
         writeln!(
             md,
-            "Target: legibility {:.2}, known font {}. Camera at the target's position (focus ±3 D, apertures 2–8 mm, RGB and one-band filters): {}. Encode {t_encode:.0} s, evaluation {t_eval:.0} s.\n",
+            "Target: legibility {:.2}, known font {}. Camera at the target's position (focus ±3 D, apertures 2–8 mm, RGB and one-band filters): {}. Encode {t_encode:.0} s, evaluation {t_eval:.0} s (views drawn with {sub_rays} sub-rays per sample).\n",
             r.target.legibility,
             score_cell(Some(&r.target)),
             r.camera

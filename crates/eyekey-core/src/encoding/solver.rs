@@ -167,16 +167,7 @@ pub fn estimate_lipschitz(obj: &dyn Objective, steps: u32, seed: u64) -> f64 {
 /// Without reorthogonalisation: lost orthogonality only repeats converged eigenvalues. No margin is added.
 pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64 {
     let n = obj.dim();
-    let mut state = seed | 1;
-    let mut v: Vec<f32> = (0..n)
-        .map(|_| {
-            // xorshift: a cheap deterministic start vector with positive entries.
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            0.5 + (state % 1000) as f32 / 1000.0
-        })
-        .collect();
+    let mut v = start_vector(n, seed);
     let nv = norm(&v);
     if nv == 0.0 {
         return 0.0;
@@ -211,6 +202,19 @@ pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64
     }
     beta.truncate(alpha.len() - 1);
     tridiagonal_top_eigenvalue(&alpha, &beta)
+}
+
+/// The Lanczos start: xorshift, a cheap deterministic vector with positive entries in [0.5, 1.5).
+fn start_vector(n: usize, seed: u64) -> Vec<f32> {
+    let mut state = seed | 1;
+    (0..n)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            0.5 + (state % 1000) as f32 / 1000.0
+        })
+        .collect()
 }
 
 /// The largest eigenvalue of the symmetric tridiagonal matrix with diagonal `a` and off-diagonal `b`, by
@@ -656,15 +660,7 @@ mod tests {
                 .map(|j| 2.0 * p.m.iter().zip(&mv).map(|(row, m)| row[j] * m).sum::<f64>())
                 .collect()
         };
-        let mut state = 12345u64 | 1;
-        let mut v: Vec<f64> = (0..n)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                0.5 + (state % 1000) as f64 / 1000.0
-            })
-            .collect();
+        let mut v: Vec<f64> = start_vector(n, 12345).into_iter().map(f64::from).collect();
         let mut rayleigh = Vec::new();
         for _ in 0..2000 {
             let nv = v.iter().map(|a| a * a).sum::<f64>().sqrt();
