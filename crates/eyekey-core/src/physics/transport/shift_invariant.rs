@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::rng::{SubRayDraws, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, Tracer};
-use crate::physics::diffraction::{airy_intensity, sinc2};
+use crate::physics::diffraction::{sinc2, AiryTable};
 use crate::physics::display::Aperture;
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
 
@@ -462,11 +462,14 @@ impl Tracer<'_> {
         let lambda_mm = wave.wavelength_nm * 1e-6;
         // The pattern's angular density: Airy π·a²/(4λ²)·[2J₁(x)/x]², x = π·a·θ/λ (it integrates to 1 over the
         // plane of angles); sinc² per axis, (A/λ)²·sinc²(Aθ_x/λ)·sinc²(Aθ_y/λ).
+        // The Airy factor from its table (this is the pupil-sampled kernels' inner loop).
+        let airy = AiryTable::get();
+        let (x_per_theta, airy_peak) = (
+            std::f64::consts::PI * a / lambda_mm,
+            std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm),
+        );
         let density = |t: [f64; 2]| match d.aperture {
-            Aperture::Pinhole => {
-                let x = std::f64::consts::PI * a * t[0].hypot(t[1]) / lambda_mm;
-                std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm) * airy_intensity(x)
-            }
+            Aperture::Pinhole => airy_peak * airy.intensity(x_per_theta * (t[0] * t[0] + t[1] * t[1]).sqrt()),
             Aperture::Lenslet => (a / lambda_mm).powi(2) * sinc2(a * t[0] / lambda_mm) * sinc2(a * t[1] / lambda_mm),
         };
         let pupil_solid_angle = std::f64::consts::PI * self.r_p * self.r_p / (self.d_eye * self.d_eye);
