@@ -521,6 +521,7 @@ impl Tracer<'_> {
         }
         // Pupil-sampled (a pattern wider than the pupil): uniform pupil points from the table, each weighted by
         // the pattern's density at the angle that reaches it.
+        let per_distance = 1.0 / self.d_eye;
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let mut draws = self.block_draws(view, mx, my);
@@ -532,8 +533,8 @@ impl Tracer<'_> {
                     let p = ray % table.points.len();
                     let [rx, ry] = table.points[p];
                     let theta = [
-                        (rx * self.r_p - chief[0]) / self.d_eye,
-                        (ry * self.r_p - chief[1]) / self.d_eye,
+                        (rx * self.r_p - chief[0]) * per_distance,
+                        (ry * self.r_p - chief[1]) * per_distance,
                     ];
                     let ray_weight = density(theta) * pupil_solid_angle;
                     if ray_weight == 0.0 {
