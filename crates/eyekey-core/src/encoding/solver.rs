@@ -175,8 +175,7 @@ pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64
     v.par_iter_mut().for_each(|x| *x /= nv as f32);
     let mut v_prev = vec![0f32; n];
     let mut w = vec![0f32; n];
-    let (mut alpha, mut beta) = (Vec::new(), Vec::new());
-    let mut b_prev = 0.0f64;
+    let (mut alpha, mut beta) = (Vec::new(), Vec::<f64>::new());
     for _ in 0..steps.max(1) {
         obj.curvature_product(&v, &mut w);
         let a = v
@@ -184,7 +183,7 @@ pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64
             .zip(w.par_iter())
             .map(|(x, y)| *x as f64 * *y as f64)
             .sum::<f64>();
-        let (af, bf) = (a as f32, b_prev as f32);
+        let (af, bf) = (a as f32, beta.last().copied().unwrap_or(0.0) as f32);
         w.par_iter_mut()
             .zip(v.par_iter().zip(v_prev.par_iter()))
             .for_each(|(wi, (vi, pi))| *wi -= af * vi + bf * pi);
@@ -194,7 +193,6 @@ pub fn lanczos_top_eigenvalue(obj: &dyn Objective, steps: u32, seed: u64) -> f64
             break;
         }
         beta.push(b);
-        b_prev = b;
         std::mem::swap(&mut v_prev, &mut v);
         v.par_iter_mut()
             .zip(w.par_iter())

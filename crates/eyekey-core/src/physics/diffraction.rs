@@ -115,10 +115,11 @@ pub fn airy_intensity(x: f64) -> f64 {
     v * v
 }
 
-/// [`airy_intensity`] tabulated for the kernels' inner loops: I(x) = [2J₁(x)/x]² and its derivative
+/// [`airy_intensity`] tabulated for the kernels' inner loops (held by [`DiffractionSampler`]): I(x) = [2J₁(x)/x]² and its derivative
 /// I′(x) = −4·[2J₁(x)/x]·J₂(x)/x (from J₁′ = J₀ − J₁/x and J₂ = 2J₁/x − J₀, A&S 9.1.27) at steps of
 /// 1/[`AIRY_TABLE_STEPS_PER_UNIT`] on 0 ≤ x ≤ [`AIRY_TABLE_X_MAX`], interpolated by cubic Hermite polynomials
 /// (error h⁴/384·max|I⁗| < 10⁻⁹, below the Bessel approximations' own); beyond, the direct formula.
+#[derive(Clone, Debug)]
 pub struct AiryTable {
     /// (I, I′) at x = k/steps.
     nodes: Vec<[f64; 2]>,
@@ -145,18 +146,12 @@ impl AiryTable {
                     let q = x * x / 4.0;
                     x / 8.0 * (1.0 - q / 3.0 + q * q / 24.0 - q * q * q / 360.0 + q * q * q * q / 8640.0)
                 } else {
-                    (2.0 * bessel_j1(x) / x - bessel_j0(x)) / x
+                    (v - bessel_j0(x)) / x
                 };
                 [v * v, -4.0 * v * j2_over_x]
             })
             .collect();
         Self { nodes }
-    }
-
-    /// The process's table (built once, 64 KiB).
-    pub fn get() -> &'static Self {
-        static TABLE: std::sync::OnceLock<AiryTable> = std::sync::OnceLock::new();
-        TABLE.get_or_init(Self::new)
     }
 
     /// [2J₁(x)/x]², from the table where it reaches.
@@ -202,6 +197,8 @@ pub fn sinc2(t: f64) -> f64 {
 pub struct DiffractionSampler {
     /// (x, encircled energy) of the Airy pattern, ascending.
     airy: Cdf,
+    /// The Airy pattern's intensity, for weighting pupil-sampled sub-rays.
+    airy_intensity: AiryTable,
     /// (t, cumulative power) of sinc² over [−T, T], ascending.
     sinc: Cdf,
 }
@@ -290,7 +287,7 @@ impl DiffractionSampler {
         SHARED.get_or_init(Self::new)
     }
 
-    /// Tabulates both distributions.
+    /// Tabulates both distributions and the Airy intensity.
     pub fn new() -> Self {
         let airy_total = airy_encircled_energy(AIRY_X_MAX);
         let airy = (0..=TABLE_STEPS)
@@ -317,8 +314,14 @@ impl DiffractionSampler {
         }
         Self {
             airy: Cdf::new(airy),
+            airy_intensity: AiryTable::new(),
             sinc: Cdf::new(sinc),
         }
+    }
+
+    /// The tabulated Airy intensity [2J₁(x)/x]² (64 KiB, built with the sampler).
+    pub fn airy_table(&self) -> &AiryTable {
+        &self.airy_intensity
     }
 
     #[inline]
@@ -521,7 +524,7 @@ mod tests {
     fn the_airy_tables_slopes_are_the_intensitys_finite_differences() {
         // I′ at every node (the series of J₂/x below 1, the Bessel formula above) against a central difference
         // of the direct intensity, whose error (δ²/6·I‴ and the approximations' 10⁻⁸/δ) stays below 10⁻⁵.
-        let table = AiryTable::get();
+        let table = DiffractionSampler::shared().airy_table();
         let delta = 1e-3;
         for (k, &[y, m]) in table.nodes.iter().enumerate().skip(1).step_by(7) {
             let x = k as f64 / AIRY_TABLE_STEPS_PER_UNIT as f64;
@@ -535,7 +538,7 @@ mod tests {
     fn the_airy_table_is_the_airy_intensity() {
         // Between the nodes and beyond the table, on both sides of zero. Within the node interval after x = 3,
         // where A&S switch from 9.4.4 to 9.4.6, the direct formula jumps by about 10⁻⁸ and the table does not.
-        let table = AiryTable::get();
+        let table = DiffractionSampler::shared().airy_table();
         let (mut worst, mut at_switch) = (0f64, 0f64);
         let h = 1.0 / AIRY_TABLE_STEPS_PER_UNIT as f64;
         for k in 0..60_000 {

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::rng::{SubRayDraws, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, Tracer};
-use crate::physics::diffraction::{sinc2, AiryTable};
+use crate::physics::diffraction::sinc2;
 use crate::physics::display::Aperture;
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
 
@@ -463,7 +463,7 @@ impl Tracer<'_> {
         // The pattern's angular density: Airy π·a²/(4λ²)·[2J₁(x)/x]², x = π·a·θ/λ (it integrates to 1 over the
         // plane of angles); sinc² per axis, (A/λ)²·sinc²(Aθ_x/λ)·sinc²(Aθ_y/λ).
         // The Airy factor from its table (this is the pupil-sampled kernels' inner loop).
-        let airy = AiryTable::get();
+        let airy = self.sampler.expect("a wave-optics build").airy_table();
         let (x_per_theta, airy_peak) = (
             std::f64::consts::PI * a / lambda_mm,
             std::f64::consts::PI * a * a / (4.0 * lambda_mm * lambda_mm),
