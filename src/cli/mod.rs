@@ -208,7 +208,7 @@ pub enum ExperimentCommand {
         /// Instead of the default: population decoys.
         #[arg(long)]
         decoys: Option<u32>,
-        /// Instead of the default: the decoys' weight.
+        /// Instead of the default (0.5 on `secure`, 0.3 on the others): the decoys' weight.
         #[arg(long)]
         decoy_weight: Option<f64>,
         /// Instead of the default: the decoys' leak penalty weight.
@@ -291,6 +291,10 @@ pub struct BenchArgs {
     /// (`near_pupil_decoys`); its figures go to their own section, `job-near-pupil`.
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16))]
     pub near_pupil_decoys: Option<u32>,
+    /// For `--section job`: the job with its decoys at this weight instead of the display's default
+    /// (`decoy_weight`); its figures go to their own section, `job-decoy-weight`.
+    #[arg(long)]
+    pub decoy_weight: Option<f64>,
 }
 
 /// Options of `eyekey encode`.
@@ -322,7 +326,7 @@ pub struct EncodeArgs {
     /// frames whose target is stacked on a ring (`--head-radius`).
     #[arg(long)]
     pub near_pupil_ring: Option<f64>,
-    /// Weight of each decoy observer relative to the target.
+    /// Weight of each decoy observer relative to the target (default: 0.5 on the `secure` design, 0.3 on others).
     #[arg(long)]
     pub decoy_weight: Option<f64>,
     /// Weight of the leak penalty on every decoy (0 = off; docs/design.md §3.1).
@@ -686,7 +690,7 @@ pub fn run(cli: Cli) -> Result<()> {
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
                 decoys_at_target_pupil,
                 population_decoys: decoys.unwrap_or(d.population_decoys),
-                decoy_weight: decoy_weight.unwrap_or(d.decoy_weight),
+                decoy_weight: decoy_weight.or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),
                 near_pupil_decoys: near_pupil_decoys.unwrap_or(d.near_pupil_decoys),
                 sub_rays: sub_rays.unwrap_or(d.sub_rays),
@@ -846,7 +850,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
             (None, Some(_)) => DecoyKind::Image,
             (None, None) => d.decoy,
         },
-        decoy_weight: a.decoy_weight.unwrap_or(d.decoy_weight),
+        decoy_weight: a.decoy_weight.or(d.decoy_weight),
         leak_weight: a.leak_weight.unwrap_or(d.leak_weight),
         ensure_target_reads: !a.no_target_guard,
         seed: a.seed.unwrap_or(d.seed),

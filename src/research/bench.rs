@@ -789,11 +789,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 _ => run.job()?,
             };
             print!("{body}");
-            let name = match (name, args.near_pupil_decoys) {
-                ("job", Some(_)) => "job-near-pupil",
-                _ => name,
-            };
-            write_section(&args.out, name, &body)?;
+            // A job with an option other than the default goes to a section of its own.
+            let mut name = name.to_string();
+            if name == "job" {
+                if args.near_pupil_decoys.is_some() {
+                    name.push_str("-near-pupil");
+                }
+                if args.decoy_weight.is_some() {
+                    name.push_str("-decoy-weight");
+                }
+            }
+            write_section(&args.out, &name, &body)?;
         }
     }
     Ok(())
@@ -897,7 +903,7 @@ impl BenchRun<'_> {
                 near_pupil_decoys: 0,
                 sub_rays: self.args.sub_rays,
                 // The paper's two-observer multiplexing (Eq. 14), as the target was set for.
-                decoy_weight: 1.0,
+                decoy_weight: Some(1.0),
                 leak_weight: 0.0,
                 ensure_target_reads: false,
                 ..Default::default()
@@ -925,6 +931,7 @@ impl BenchRun<'_> {
                     .args
                     .near_pupil_decoys
                     .unwrap_or(EncodeOptions::default().near_pupil_decoys),
+                decoy_weight: self.args.decoy_weight,
                 ..Default::default()
             },
         };
@@ -978,12 +985,19 @@ impl BenchRun<'_> {
                 p.readable_count
             ))
         };
-        let (near, near_option) = match self.args.near_pupil_decoys {
-            Some(n) => (
-                format!(" --near-pupil-decoys {n}"),
-                format!(" but {n} near-pupil decoys"),
-            ),
-            None => (String::new(), String::new()),
+        let (mut near, mut but) = (String::new(), Vec::new());
+        if let Some(n) = self.args.near_pupil_decoys {
+            near.push_str(&format!(" --near-pupil-decoys {n}"));
+            but.push(format!("{n} near-pupil decoys"));
+        }
+        if let Some(w) = self.args.decoy_weight {
+            near.push_str(&format!(" --decoy-weight {w}"));
+            but.push(format!("decoys at weight {w}"));
+        }
+        let near_option = if but.is_empty() {
+            String::new()
+        } else {
+            format!(" but {}", but.join(" and "))
         };
         let near_pupil = spec.options.near_pupil_decoys;
         let scale = encoded.solver.decoy_weight_scale;
@@ -1002,7 +1016,7 @@ impl BenchRun<'_> {
             self.stamp,
             build_kind(),
             spec.options.population_decoys,
-            spec.options.decoy_weight,
+            spec.options.decoy_weight_on(&spec.display),
             spec.options.leak_weight,
             spec.options.max_iterations,
             spec.options.sub_rays,

@@ -43,6 +43,8 @@ struct Encoding {
     camera_ring_mm: f64,
     /// Positions of the target on its ring (`head_positions`).
     head_positions: u32,
+    /// The encoder's target guard (`ensure_target_reads`), as a job has it.
+    guard: bool,
 }
 
 /// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
@@ -60,6 +62,7 @@ const BASELINE: Encoding = Encoding {
     camera_focus_d: &[-1.0, 0.0, 1.0],
     camera_ring_mm: 0.0,
     head_positions: 4,
+    guard: false,
 };
 
 /// Camera decoys at 0 and +2 D behind a 4 mm aperture, at the seat and on a 0.8 mm ring around it: the settings
@@ -115,7 +118,7 @@ impl Baseline {
         EncodeOptions {
             population_decoys: 0,
             near_pupil_decoys: 0,
-            decoy_weight: 0.0,
+            decoy_weight: Some(0.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
             max_iterations,
@@ -135,7 +138,7 @@ impl Baseline {
                 population_decoys: e.decoys,
                 near_pupil_decoys: e.near_pupil,
                 near_pupil_ring_mm: e.near_pupil_ring_mm,
-                decoy_weight: e.decoy_weight,
+                decoy_weight: Some(e.decoy_weight),
                 head_radius_mm: e.head_radius_mm,
                 head_positions: e.head_positions,
                 leak_weight: e.leak_weight,
@@ -144,6 +147,9 @@ impl Baseline {
                 camera_decoy_aperture_mm: e.camera_aperture_mm,
                 camera_decoy_extra_apertures_mm: e.camera_extra_apertures_mm.to_vec(),
                 camera_decoy_ring_mm: e.camera_ring_mm,
+                ensure_target_reads: e.guard,
+                // The guard judges the target as the job would, with the slip's text hint.
+                document_text: e.guard.then(|| self.text.clone()),
                 ..Self::options(max_iterations)
             },
         )
@@ -337,6 +343,14 @@ pub fn run(
             label: "6 noise decoys, weight 0.3, leak penalty 3, 6 near-pupil decoys (the defaults)",
             leak_weight: 3.0,
             near_pupil: 6,
+            ..BASELINE
+        },
+        Encoding {
+            label: "6 noise decoys, weight 0.5, leak penalty 3, 6 near-pupil decoys, the target guard (the secure defaults)",
+            decoy_weight: 0.5,
+            leak_weight: 3.0,
+            near_pupil: 6,
+            guard: true,
             ..BASELINE
         },
         Encoding {

@@ -315,7 +315,7 @@ impl<'a> Views<'a> {
                 population_decoys: decoys,
                 near_pupil_decoys: 0,
                 decoy: DecoyKind::Noise,
-                decoy_weight: weight,
+                decoy_weight: Some(weight),
                 optics: self.setup.optics,
                 seed: self.seed.wrapping_mul(1000).wrapping_add(e as u64),
                 sub_rays: self.setup.sub_rays,

@@ -39,7 +39,7 @@ pub fn run(
         "target (pupil)",
         "PIN",
         "encode",
-        "decoy weights scaled by",
+        "decoys' weight: start × scale",
         "target: legibility, known font",
         "target read under other evaluation seeds (worst legibility, worst known-font margin)",
         "target with 8× the sub-rays: legibility, known font",
@@ -173,8 +173,9 @@ pub fn run(
             };
             writeln!(
                 md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {} of {} | {readers} | {distance} |",
+                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} × {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {} of {} | {readers} | {distance} |",
                 target.pupil_diameter_mm,
+                options.decoy_weight_on(&display),
                 enc.solver.decoy_weight_scale,
                 r.target.legibility,
                 if r.target.readable { "" } else { " **not read**" },

@@ -26,7 +26,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
     let base = EncodeOptions {
         population_decoys: 6,
         near_pupil_decoys: 0,
-        decoy_weight: 0.3,
+        decoy_weight: Some(0.3),
         ..Baseline::options(max_iterations)
     };
     let v = |label: &str, options: EncodeOptions| Variant {
@@ -40,7 +40,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
             EncodeOptions {
                 population_decoys: 12,
                 near_pupil_decoys: 0,
-                decoy_weight: 0.2,
+                decoy_weight: Some(0.2),
                 ..base.clone()
             },
         ),
@@ -65,7 +65,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
             EncodeOptions {
                 population_decoys: decoys,
                 near_pupil_decoys: 0,
-                decoy_weight: 0.0,
+                decoy_weight: Some(0.0),
                 leak_weight: leak,
                 ..base.clone()
             },
@@ -109,7 +109,7 @@ fn variants(max_iterations: u32) -> Vec<Variant> {
         EncodeOptions {
             population_decoys: 12,
             near_pupil_decoys: 0,
-            decoy_weight: 0.2,
+            decoy_weight: Some(0.2),
             leak_weight: 1.0,
             ..base.clone()
         },

@@ -253,7 +253,7 @@ impl PaperSetup {
             sub_rays: 16,
             optics: self.optics,
             // The paper's Eq. 14: every observer at the target's weight, nothing else.
-            decoy_weight: 1.0,
+            decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
             ..Default::default()
@@ -281,7 +281,7 @@ impl PaperSetup {
             max_iterations,
             decoy: DecoyKind::Image,
             optics: self.optics,
-            decoy_weight: 1.0,
+            decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
             ..Default::default()
@@ -737,7 +737,7 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
             population_decoys: c.decoys,
             near_pupil_decoys: 0,
             decoy: c.decoy,
-            decoy_weight: c.decoy_weight,
+            decoy_weight: Some(c.decoy_weight),
             max_iterations,
             sub_rays: 12,
             seed: 5,
@@ -1022,7 +1022,7 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
         "| encoder | multiplex, {} population decoys (noise masks), {} near-pupil decoys, decoy weight {}, leak weight {}, {} adaptive rounds, camera decoys: {}, decoy weights finally scaled by {:.3} |",
         options.population_decoys,
         options.near_pupil_decoys,
-        options.decoy_weight,
+        options.decoy_weight_on(display),
         options.leak_weight,
         options.adaptive_rounds,
         options.camera_decoys,

@@ -119,7 +119,7 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str, fourier: bool) ->
             optics: Optics::Geometric,
             population_decoys: 6,
             near_pupil_decoys: 0,
-            decoy_weight: 1.0,
+            decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
             ..Default::default()

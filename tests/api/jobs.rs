@@ -141,6 +141,10 @@ async fn a_job_keeps_the_profile_version_it_was_created_with() {
     assert_eq!(job["state"], "queued");
     assert_eq!(job["options"]["max_iterations"], 5);
     assert_eq!(job["options"]["tolerance"], 1e-5, "defaults are filled in");
+    assert_eq!(
+        job["options"]["decoy_weight"], 0.3,
+        "the display's default decoy weight is stated"
+    );
     let r = app
         .op_put(
             &format!("/v1/profiles/{}", f.profile_id),
@@ -150,6 +154,34 @@ async fn a_job_keeps_the_profile_version_it_was_created_with() {
     expect_json(r, StatusCode::OK).await;
     assert_eq!(app.job(job["id"].as_str().unwrap()).await["profile_version"], 1);
     assert_eq!(app.create_job(&f).await["profile_version"], 2);
+}
+
+#[tokio::test]
+async fn a_job_on_the_secure_design_weighs_its_decoys_at_one_half_unless_asked_otherwise() {
+    let app = spawn_app().await;
+    let f = app.fixtures().await;
+    let r = app
+        .op_post("/v1/displays", &json!({ "name": "terminal", "preset": "secure" }))
+        .await;
+    let secure = expect_json(r, StatusCode::CREATED).await["display"]["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let mut body = job_body(&f);
+    body["display_id"] = json!(secure);
+    let job = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+    assert_eq!(job["options"]["decoy_weight"], 0.5, "{}", job["options"]);
+    // As stored: the job's view reads its options back from the database.
+    let stored = app.job(job["id"].as_str().unwrap()).await;
+    assert_eq!(stored["options"]["decoy_weight"], 0.5);
+    body["options"]["decoy_weight"] = json!(0.2);
+    let asked = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+    assert_eq!(asked["options"]["decoy_weight"], 0.2);
+    // The tiny display of the fixtures is not the secure design.
+    body["display_id"] = json!(f.display_id);
+    body["options"]["decoy_weight"] = json!(null);
+    let other = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+    assert_eq!(other["options"]["decoy_weight"], 0.3);
 }
 
 #[tokio::test]

@@ -279,6 +279,8 @@ pub async fn create_job(
     }
     let request_hash = request_hash(&state.master_key, &body, &options)?;
     let (display, target, observers) = resolve_inputs(&state.db, &body).await?;
+    // The job states the options it runs with: the display's defaults filled in (the decoys' weight).
+    let options = options.for_display(&display);
     let warnings = resolvability_warnings(&Resolvability::of(&display));
     admit(&state.config, &display, &options, observers.len())?;
     let id = JobId::new_v4();

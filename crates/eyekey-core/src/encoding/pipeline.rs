@@ -615,7 +615,7 @@ fn solve_round(
         terms.push(Term {
             observer,
             objective: objective.clone(),
-            weight: o.decoy_weight * decoy_scale,
+            weight: o.decoy_weight_on(d) * decoy_scale,
             leak: cast.leak.as_ref().map(|p| (p, o.leak_weight * decoy_scale)),
         });
     }
@@ -1042,7 +1042,7 @@ mod tests {
             spec.options = EncodeOptions {
                 population_decoys: 0,
                 near_pupil_decoys: 0,
-                decoy_weight,
+                decoy_weight: Some(decoy_weight),
                 leak_weight: 0.0,
                 max_iterations: 60,
                 ensure_target_reads,
