@@ -985,16 +985,16 @@ impl BenchRun<'_> {
                 p.readable_count
             ))
         };
-        let (mut near, mut but) = (String::new(), Vec::new());
+        let (mut flags, mut but) = (String::new(), Vec::new());
         if let Some(n) = self.args.near_pupil_decoys {
-            near.push_str(&format!(" --near-pupil-decoys {n}"));
+            flags.push_str(&format!(" --near-pupil-decoys {n}"));
             but.push(format!("{n} near-pupil decoys"));
         }
         if let Some(w) = self.args.decoy_weight {
-            near.push_str(&format!(" --decoy-weight {w}"));
+            flags.push_str(&format!(" --decoy-weight {w}"));
             but.push(format!("decoys at weight {w}"));
         }
-        let near_option = if but.is_empty() {
+        let but = if but.is_empty() {
             String::new()
         } else {
             format!(" but {}", but.join(" and "))
@@ -1004,8 +1004,8 @@ impl BenchRun<'_> {
         let cold = evaluate_1000("people's operators built")?;
         let warm = evaluate_1000("people's operators cached")?;
         Ok(format!(
-            "Measured {} by `eyekey bench --section job{near}` ({}, transport cache empty at the start): the \
-             `secure` preset, every default option{near_option} ({} population and {near_pupil} near-pupil decoys at \
+            "Measured {} by `eyekey bench --section job{flags}` ({}, transport cache empty at the start): the \
+             `secure` preset, every default option{but} ({} population and {near_pupil} near-pupil decoys at \
              weight {}, leak weight {}, {} iterations at most, {} sub-rays; evaluation: {} people, camera, key \
              sensitivity, head movement).\n\n{}\
              | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}, \
