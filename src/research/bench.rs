@@ -1058,13 +1058,7 @@ impl BenchRun<'_> {
             &spec.display,
             &spec.target,
             EyePosition::default(),
-            &TransportOptions {
-                sub_rays: (pipeline::GUARD_SUB_RAYS * o.sub_rays).min(1024),
-                seed: o.seed ^ 0x5A5A,
-                retina_oversample: 1,
-                derivative_terms: vec![],
-                ..Default::default()
-            },
+            &pipeline::guard_transport(o),
             o.optics,
             &cache,
         )?;

@@ -220,6 +220,15 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
     }
 }
 
+/// Transport options of the target guard's second look at the target (`GUARD_SEED`, `GUARD_SUB_RAYS`).
+pub fn guard_transport(o: &EncodeOptions) -> TransportOptions {
+    TransportOptions {
+        seed: o.seed ^ GUARD_SEED,
+        sub_rays: (GUARD_SUB_RAYS * o.sub_rays).min(1024),
+        ..base_transport(o)
+    }
+}
+
 /// The target guard's second look at the target draws its kernels with the job's seed xor this.
 const GUARD_SEED: u64 = 0x6A7D;
 /// ... and with this many times the job's sub-rays (at most the transport's 1,024): kernels near their
@@ -283,11 +292,7 @@ impl Cast {
                 .map_err(|e| observer_error("target profile", e))
         };
         let target = look(&target_opts)?;
-        let check = look(&TransportOptions {
-            seed: o.seed ^ GUARD_SEED,
-            sub_rays: (GUARD_SUB_RAYS * o.sub_rays).min(1024),
-            ..base_transport(o)
-        })?;
+        let check = look(&guard_transport(o))?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();
