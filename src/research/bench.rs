@@ -740,6 +740,36 @@ pub fn write_section(path: &Path, name: &str, body: &str) -> Result<()> {
     std::fs::write(path, new).with_context(|| format!("writing {}", path.display()))
 }
 
+/// An option of the `job` section other than the default.
+struct JobOverride {
+    /// Appended to the section's name (`job-near-pupil`, `job-decoy-weight`).
+    section: &'static str,
+    /// The command-line flag that asked for it, with a leading space.
+    flag: String,
+    /// What it changes, for the section's text.
+    what: String,
+}
+
+/// The `job` section's options other than the default, as `args` gives them.
+fn job_overrides(args: &BenchArgs) -> Vec<JobOverride> {
+    let mut overrides = Vec::new();
+    if let Some(n) = args.near_pupil_decoys {
+        overrides.push(JobOverride {
+            section: "-near-pupil",
+            flag: format!(" --near-pupil-decoys {n}"),
+            what: format!("{n} near-pupil decoys"),
+        });
+    }
+    if let Some(w) = args.decoy_weight {
+        overrides.push(JobOverride {
+            section: "-decoy-weight",
+            flag: format!(" --decoy-weight {w}"),
+            what: format!("decoys at weight {w}"),
+        });
+    }
+    overrides
+}
+
 /// The benchmark sections `eyekey bench --section` accepts besides `all`, in the order they run.
 const SECTIONS: [&str; 6] = ["transport", "wave", "kernels", "solver", "encode", "job"];
 
@@ -792,12 +822,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             // A job with an option other than the default goes to a section of its own.
             let mut name = name.to_string();
             if name == "job" {
-                if args.near_pupil_decoys.is_some() {
-                    name.push_str("-near-pupil");
-                }
-                if args.decoy_weight.is_some() {
-                    name.push_str("-decoy-weight");
-                }
+                name.extend(job_overrides(args).iter().map(|o| o.section));
             }
             write_section(&args.out, &name, &body)?;
         }
@@ -985,19 +1010,13 @@ impl BenchRun<'_> {
                 p.readable_count
             ))
         };
-        let (mut flags, mut but) = (String::new(), Vec::new());
-        if let Some(n) = self.args.near_pupil_decoys {
-            flags.push_str(&format!(" --near-pupil-decoys {n}"));
-            but.push(format!("{n} near-pupil decoys"));
-        }
-        if let Some(w) = self.args.decoy_weight {
-            flags.push_str(&format!(" --decoy-weight {w}"));
-            but.push(format!("decoys at weight {w}"));
-        }
-        let but = if but.is_empty() {
+        let overrides = job_overrides(self.args);
+        let flags: String = overrides.iter().map(|o| o.flag.as_str()).collect();
+        let but = if overrides.is_empty() {
             String::new()
         } else {
-            format!(" but {}", but.join(" and "))
+            let what: Vec<&str> = overrides.iter().map(|o| o.what.as_str()).collect();
+            format!(" but {}", what.join(" and "))
         };
         let near_pupil = spec.options.near_pupil_decoys;
         let scale = encoded.solver.decoy_weight_scale;

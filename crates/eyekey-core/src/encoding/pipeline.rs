@@ -625,11 +625,12 @@ fn solve_round(
             leak: None,
         });
     }
+    let decoy_weight = o.decoy_weight_on(d) * decoy_scale;
     for (observer, objective) in cast.others.iter().zip(&cast.decoy_objectives) {
         terms.push(Term {
             observer,
             objective: objective.clone(),
-            weight: o.decoy_weight_on(d) * decoy_scale,
+            weight: decoy_weight,
             leak: cast.leak.as_ref().map(|p| (p, o.leak_weight * decoy_scale)),
         });
     }
