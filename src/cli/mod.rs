@@ -150,6 +150,9 @@ pub enum ExperimentCommand {
         /// Only the encodings whose label contains this text.
         #[arg(long)]
         only: Option<String>,
+        /// Every encoding's decoys at this weight instead of its own (its label then says so).
+        #[arg(long)]
+        decoy_weight: Option<f64>,
     },
     /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
     /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
@@ -167,6 +170,9 @@ pub enum ExperimentCommand {
         /// written to `headbox-only.md`).
         #[arg(long)]
         only: Option<String>,
+        /// Every row's decoys at this weight instead of 0.3 (its label then says so).
+        #[arg(long)]
+        decoy_weight: Option<f64>,
     },
     /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
     /// the share of held-out people and of camera settings at the target's position that read.
@@ -629,6 +635,7 @@ pub fn run(cli: Cli) -> Result<()> {
             max_iterations,
             evaluation_sub_rays,
             only,
+            decoy_weight,
         }) => {
             let bystanders = eyekey_core::evaluation::BystanderOptions {
                 lateral_mm: lateral,
@@ -645,7 +652,8 @@ pub fn run(cli: Cli) -> Result<()> {
                     bystanders,
                     max_iterations,
                     evaluation_sub_rays,
-                    only.as_deref()
+                    only.as_deref(),
+                    decoy_weight
                 )?
             );
         }
@@ -654,10 +662,11 @@ pub fn run(cli: Cli) -> Result<()> {
             population,
             max_iterations,
             only,
+            decoy_weight,
         }) => {
             print!(
                 "{}",
-                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref())?
+                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref(), decoy_weight)?
             );
         }
         Command::Experiment(ExperimentCommand::Encoders {

@@ -19,6 +19,7 @@ use eyekey_core::physics::observer::Optics;
 use eyekey_core::physics::transport::TransportCache;
 
 /// One encoding looked at from everywhere.
+#[derive(Clone, Copy)]
 struct Encoding {
     label: &'static str,
     decoys: u32,
@@ -253,10 +254,13 @@ fn position_rows(md: &mut String, b: &BystanderSummary) -> Result<()> {
             score_cell(p.best_person.as_ref()),
             p.camera_settings_read,
             p.camera_settings,
-            if p.camera_settings_that_read.is_empty() {
-                String::new()
-            } else {
-                format!(": {}", p.camera_settings_that_read.join("; "))
+            match (p.camera_settings_that_read.is_empty(), p.camera_guesses_to_read) {
+                (true, _) => String::new(),
+                (false, None) => format!(": {}", p.camera_settings_that_read.join("; ")),
+                (false, Some(n)) => format!(
+                    ": {}; the camera attacker's own pick (readings by falling confidence) is right at guess {n}",
+                    p.camera_settings_that_read.join("; ")
+                ),
             },
             cam
         )?;
@@ -272,6 +276,7 @@ pub fn run(
     max_iterations: u32,
     sub_rays: u32,
     only: Option<&str>,
+    decoy_weight: Option<f64>,
 ) -> Result<String> {
     bystanders.validate().map_err(|e| anyhow::anyhow!("bystanders: {e}"))?;
     if bystanders.lateral_mm.is_empty()
@@ -503,6 +508,12 @@ pub fn run(
             near_pupil: 6,
             ..BASELINE
         },
+        Encoding {
+            label: "decoys at 0.5 (secure's default weight), 6 near-pupil decoys also on a 0.8 mm ring, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
+            head_positions: 6,
+            decoy_weight: eyekey_core::encoding::options::SECURE_DECOY_WEIGHT,
+            ..BOTH_RINGS
+        },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
@@ -510,6 +521,7 @@ pub fn run(
         if only.is_some_and(|f| !e.label.contains(f)) {
             continue;
         }
+        let (e, label) = &with_decoy_weight(e, decoy_weight);
         let (l, t_encode) = base.encode(e, max_iterations)?;
         let options = EvaluationOptions {
             population: 0,
@@ -527,7 +539,7 @@ pub fn run(
         let (ev, t_eval) = base.evaluate(&l, &options, &|p| {
             eprint!(
                 "\r{}: evaluation {:.0} % ({:.0} s)",
-                e.label,
+                label,
                 100.0 * p,
                 t.elapsed().as_secs_f64()
             )
@@ -536,7 +548,7 @@ pub fn run(
         eyekey_core::encoding::pipeline::write_evaluation(&ev, &dir)?;
         let r = &ev.report;
         let b = r.bystanders.as_ref().expect("bystanders were asked for");
-        writeln!(md, "### {}\n", e.label)?;
+        writeln!(md, "### {label}\n")?;
         writeln!(
             md,
             "Target: legibility {:.2}, known font {}. Camera at the target's position (focus ±3 D, apertures 2–8 mm, RGB and one-band filters): {}. Encode {t_encode:.0} s, evaluation {t_eval:.0} s (views drawn with {sub_rays} sub-rays per sample).\n",
@@ -569,8 +581,8 @@ pub fn run(
         }
         position_rows(&mut md, b)?;
         md.push('\n');
-        eprintln!("\n{}: encode {t_encode:.0} s, evaluation {t_eval:.0} s", e.label);
-        all.push(serde_json::json!({"encoding": e.label, "report": r}));
+        eprintln!("\n{label}: encode {t_encode:.0} s, evaluation {t_eval:.0} s");
+        all.push(serde_json::json!({"encoding": label, "report": r}));
     }
     std::fs::write(out.join("bystanders.md"), &md)?;
     std::fs::write(out.join("bystanders.json"), serde_json::to_string_pretty(&all)?)?;
@@ -584,6 +596,17 @@ pub(super) enum HeadBoxMethod {
     Fixed,
     /// The same frames re-indexed for the tracked eye position (`physics::tracking::retarget`).
     Tracked,
+}
+
+/// `e` with its decoys at `weight` when one is given (and it has decoys), and its label saying so.
+fn with_decoy_weight(e: &Encoding, weight: Option<f64>) -> (Encoding, String) {
+    match weight {
+        Some(w) if e.decoys + e.near_pupil > 0 => (
+            Encoding { decoy_weight: w, ..*e },
+            format!("{}, decoys at weight {w}", e.label),
+        ),
+        _ => (*e, e.label.to_string()),
+    }
 }
 
 /// One head-box experiment row: label, the target's ring radius (mm), how the frames are served, the leak weight,
@@ -628,7 +651,13 @@ pub(super) fn head_rings(
 /// and encodings with the target stacked at 4 positions on a ring (2.5 mm, 5 mm); the target's readings over
 /// ±5 mm and the fraction of `population` people at the design position who read each. Writes
 /// `out/headbox.md`.
-pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&str>) -> Result<String> {
+pub fn headbox(
+    out: &Path,
+    population: u32,
+    max_iterations: u32,
+    only: Option<&str>,
+    decoy_weight: Option<f64>,
+) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let base = Baseline::new()?;
     let (display, target, document, text, cache) =
@@ -919,40 +948,63 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         3.0,
         true,
     )];
+    // The 6-position row with the decoys at `secure`'s own default weight, 0.5 (`SECURE_DECOY_WEIGHT`), instead of
+    // 0.3: the heavier decoys took the seat from 135 to 100 readers of 11,000 (§2e); here, do they take the last
+    // camera setting at 14.4 mm, and what do they cost the target's ring?
+    let with_six_stacked_secure_weight = [(
+        "the same with decoys at 0.5 (secure's default weight), leak penalty 3, the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
+        0.3,
+        HeadBoxMethod::Tracked,
+        3.0,
+        true,
+    )];
     // Each group of rows with what its rows share: near-pupil decoys and their ring around the seat, the focus
     // settings of camera decoys also on a ring (empty: no such ring), the target's positions on its ring, the
-    // camera decoys' ring radius and their apertures (the first `camera_decoy_aperture_mm`, the rest extra).
-    type Shared = (u32, f64, &'static [f64], u32, f64, &'static [f64]);
-    let groups: [(&[HeadBoxRow], Shared); 11] = [
-        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, &[4.0])),
-        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, &[4.0])),
-        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, &[4.0])),
-        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, &[4.0])),
-        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, &[4.0])),
-        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, &[4.0])),
-        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0])),
+    // camera decoys' ring radius, their apertures (the first `camera_decoy_aperture_mm`, the rest extra) and the
+    // decoys' weight.
+    type Shared = (u32, f64, &'static [f64], u32, f64, &'static [f64], f64);
+    let groups: [(&[HeadBoxRow], Shared); 12] = [
+        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, &[4.0], 0.3)),
+        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, &[4.0], 0.3)),
+        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, &[4.0], 0.3)),
+        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, &[4.0], 0.3)),
+        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, &[4.0], 0.3)),
+        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, &[4.0], 0.3)),
+        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0], 0.3)),
         (
             &with_six_stacked_far_focus,
-            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, &[4.0]),
+            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, &[4.0], 0.3),
         ),
         (
             &with_six_stacked_wider_camera_ring,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, &[4.0]),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, &[4.0], 0.3),
         ),
         (
             &with_six_stacked_wide_camera_decoys,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[8.0]),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[8.0], 0.3),
         ),
         (
             &with_six_stacked_two_apertures,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0, 8.0]),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0, 8.0], 0.3),
+        ),
+        (
+            &with_six_stacked_secure_weight,
+            (
+                6,
+                0.8,
+                &[-1.0, 0.0, 2.0],
+                6,
+                0.8,
+                &[4.0],
+                eyekey_core::encoding::options::SECURE_DECOY_WEIGHT,
+            ),
         ),
     ];
     let rows = groups
         .into_iter()
-        .flat_map(|(rows, (np, np_ring, focus, positions, ring, aperture))| {
+        .flat_map(|(rows, (np, np_ring, focus, positions, ring, aperture, weight))| {
             rows.iter()
-                .map(move |&row| (row, np, np_ring, focus, positions, ring, aperture))
+                .map(move |&row| (row, np, np_ring, focus, positions, ring, aperture, weight))
         });
     for (
         (label, head_radius_mm, method, leak_weight, cameras),
@@ -962,6 +1014,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         head_positions,
         camera_ring_mm,
         camera_apertures_mm,
+        row_weight,
     ) in rows
     {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
@@ -970,7 +1023,7 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
         let encoding = Encoding {
             label,
             decoys: 6,
-            decoy_weight: 0.3,
+            decoy_weight: row_weight,
             head_radius_mm,
             leak_weight,
             cameras,
@@ -989,7 +1042,8 @@ pub fn headbox(out: &Path, population: u32, max_iterations: u32, only: Option<&s
                 }
             }
         };
-        let (l, t_encode) = base.encode(&encoding, max_iterations)?;
+        let (encoding, label) = &with_decoy_weight(&encoding, decoy_weight);
+        let (l, t_encode) = base.encode(encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(
             &l,
             &EvaluationOptions {

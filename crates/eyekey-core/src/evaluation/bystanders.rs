@@ -121,9 +121,34 @@ pub struct BystanderPosition {
     pub camera_settings_read: u32,
     /// Camera settings tried.
     pub camera_settings: u32,
-    /// The settings that read (focus, aperture, channel), in the sweep's order.
+    /// The settings that read (focus, aperture, channel, then the view's legibility and the known-font attacker's
+    /// margin: how far its weakest character's right glyph led the best wrong one), in the sweep's order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub camera_settings_that_read: Vec<String>,
+    /// The camera attacker's own pick: trying the known-font readings of every setting here (as seen and
+    /// unwarped), most confident first and each PIN once, how many guesses until the right one
+    /// ([`guesses_to_read`]; none when no setting reads). 1: the attacker can tell which setting reads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_guesses_to_read: Option<u32>,
+}
+
+/// How many distinct texts an attacker who tries `readings` (confidence, text read, whether it is right) in order of
+/// falling confidence tries until the right one; `None` when no reading is right. The known-font attacker's
+/// confidence (its mean winning correlation, `KnownFontRead::confidence`) is the only thing it ranks by: it does
+/// not know which reading is right.
+pub fn guesses_to_read(readings: &[(f64, String, bool)]) -> Option<u32> {
+    let mut order: Vec<&(f64, String, bool)> = readings.iter().collect();
+    order.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut tried: Vec<&str> = Vec::new();
+    for (_, text, right) in order {
+        if !tried.contains(&text.as_str()) {
+            tried.push(text);
+        }
+        if *right {
+            return Some(tried.len() as u32);
+        }
+    }
+    None
 }
 
 /// Everybody who looked from elsewhere.
@@ -204,6 +229,28 @@ fn bilinear(img: &[f32], w: usize, h: usize, x: f64, y: f64) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::physics::transport::block_seen;
+
+    #[test]
+    fn the_camera_attacker_tries_distinct_readings_most_confident_first() {
+        let r = |c: f64, t: &str, right: bool| (c, t.to_string(), right);
+        // Confidence order: 0.9 "1111", 0.8 "1111" (the same guess again), 0.7 "4821" (right): the second guess.
+        let readings = vec![r(0.7, "4821", true), r(0.9, "1111", false), r(0.8, "1111", false)];
+        assert_eq!(guesses_to_read(&readings), Some(2));
+        // A right reading at the top is the first guess; a less confident right one changes nothing.
+        let readings = vec![r(0.95, "4821", true), r(0.9, "1111", false), r(0.1, "4821", true)];
+        assert_eq!(guesses_to_read(&readings), Some(1));
+        // Below three wrong PINs: the fourth guess.
+        let readings = vec![
+            r(0.2, "4821", true),
+            r(0.5, "1", false),
+            r(0.4, "2", false),
+            r(0.3, "3", false),
+        ];
+        assert_eq!(guesses_to_read(&readings), Some(4));
+        // Nothing right, or nothing at all: no number of guesses.
+        assert_eq!(guesses_to_read(&[r(0.5, "1111", false)]), None);
+        assert_eq!(guesses_to_read(&[]), None);
+    }
 
     #[test]
     fn the_default_grid_spans_10_to_500_mm_and_300_to_1500_mm() {

@@ -21,7 +21,7 @@ mod reference;
 mod report;
 
 use attackers::*;
-pub use bystanders::{unwarp, BystanderOptions, BystanderPosition, BystanderSummary};
+pub use bystanders::{guesses_to_read, unwarp, BystanderOptions, BystanderPosition, BystanderSummary};
 pub use contact_sheet::contact_sheet;
 use key_sensitivity::*;
 pub use known_font::{DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
@@ -353,10 +353,28 @@ impl Evaluator<'_> {
     /// Scores a bystander's luminance view both as seen and resampled onto the document's layout (the
     /// attacker knows the geometry and where they stand); the better of the two.
     fn score_bystander(&self, label: &str, lum: &[f32], white: f64, grid: &RetinalGrid, eye: EyePosition) -> ViewScore {
+        let [seen, back] = self.bystander_readings(label, lum, white, grid, eye);
+        Self::better_reading(seen, back)
+    }
+
+    /// A bystander's view scored as seen and unwarped back onto the document's frame.
+    fn bystander_readings(
+        &self,
+        label: &str,
+        lum: &[f32],
+        white: f64,
+        grid: &RetinalGrid,
+        eye: EyePosition,
+    ) -> [ViewScore; 2] {
         let seen = self.reference.score(label, lum, white);
         let back = self
             .reference
             .score(label, &unwarp(lum, grid, self.display, eye), white);
+        [seen, back]
+    }
+
+    /// Of a view's two readings, the one that reads, else the more legible (the strict judge: any reading counts).
+    fn better_reading(seen: ViewScore, back: ViewScore) -> ViewScore {
         let better = |a: &ViewScore, b: &ViewScore| (a.readable, a.legibility) >= (b.readable, b.legibility);
         if better(&seen, &back) {
             seen
@@ -407,17 +425,31 @@ impl Evaluator<'_> {
                 }
             }
             let (mut best_camera, mut camera_read, mut settings) = (None::<ViewScore>, 0, 0);
-            let mut readers = Vec::new();
+            let (mut readers, mut guesses) = (Vec::new(), Vec::new());
             self.camera_sweep(
                 eye,
                 &bo.camera_focus_d,
                 &bo.camera_apertures_mm,
                 &mut |setting, lum, white, grid| {
-                    let s = self.score_bystander(&format!("camera {at} {setting}"), lum, white, grid, eye);
+                    let [seen, back] =
+                        self.bystander_readings(&format!("camera {at} {setting}"), lum, white, grid, eye);
+                    guesses.extend(
+                        [&seen, &back]
+                            .into_iter()
+                            .filter_map(|s| s.known_font.as_ref())
+                            .map(|k| (k.confidence, k.text.clone(), k.correct)),
+                    );
+                    let s = Self::better_reading(seen, back);
                     settings += 1;
                     camera_read += u32::from(s.readable);
                     if s.readable {
-                        readers.push(setting.to_string());
+                        readers.push(match &s.known_font {
+                            Some(k) => format!(
+                                "{setting} (legibility {:.2}, known-font margin {:.3})",
+                                s.legibility, k.margin
+                            ),
+                            None => format!("{setting} (legibility {:.2})", s.legibility),
+                        });
                     }
                     if best_camera.as_ref().is_none_or(|b| s.legibility > b.legibility) {
                         best_camera = Some(s);
@@ -440,6 +472,7 @@ impl Evaluator<'_> {
                 camera_settings_read: camera_read,
                 camera_settings: settings,
                 camera_settings_that_read: readers,
+                camera_guesses_to_read: bystanders::guesses_to_read(&guesses),
             });
             progress((k + 1) as f64 / n as f64);
         }
@@ -511,6 +544,11 @@ mod tests {
         let b = ev.report.bystanders.unwrap();
         assert_eq!(b.positions.len(), 8);
         assert_eq!(b.nearest_reader_mm, Some(repeat), "{:#?}", b.positions);
+        assert!(
+            b.positions.iter().any(|p| p.camera_guesses_to_read.is_some()),
+            "a camera reads at the repeat somewhere: {:#?}",
+            b.positions
+        );
         for p in &b.positions {
             // The settings that read are named, one for each counted, from the settings tried.
             assert_eq!(
@@ -525,8 +563,14 @@ mod tests {
             if p.distance_mm == repeat {
                 assert_eq!(p.people_read, 1, "{p:#?}");
                 assert!(p.relative_light > 0.5, "{p:#?}");
+                // Where a camera reads a plain image, its owner needs no inside knowledge: his most confident
+                // reading is the right one.
+                if p.camera_settings_read > 0 {
+                    assert_eq!(p.camera_guesses_to_read, Some(1), "{p:#?}");
+                }
             } else {
                 assert_eq!((p.people_read, p.camera_settings_read), (0, 0), "{p:#?}");
+                assert_eq!(p.camera_guesses_to_read, None, "{p:#?}");
                 assert!(p.relative_light < 0.01, "{p:#?}");
             }
         }
