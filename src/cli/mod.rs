@@ -153,6 +153,9 @@ pub enum ExperimentCommand {
         /// Every encoding's decoys at this weight instead of its own (its label then says so).
         #[arg(long)]
         decoy_weight: Option<f64>,
+        /// Every head-box encoding's ring positions at this weight instead of 0.25 (its label then says so).
+        #[arg(long)]
+        head_weight: Option<f64>,
     },
     /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
     /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
@@ -173,6 +176,9 @@ pub enum ExperimentCommand {
         /// Every row's decoys at this weight instead of 0.3 (its label then says so).
         #[arg(long)]
         decoy_weight: Option<f64>,
+        /// Every row's ring positions at this weight instead of 0.25 (its label then says so).
+        #[arg(long)]
+        head_weight: Option<f64>,
     },
     /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
     /// the share of held-out people and of camera settings at the target's position that read.
@@ -378,6 +384,9 @@ pub struct EncodeArgs {
     /// Also make the target read from eye positions this far off axis, mm (head movement).
     #[arg(long)]
     pub head_radius: Option<f64>,
+    /// The weight of each of those positions, relative to the design position's 1 (default 0.25).
+    #[arg(long)]
+    pub head_weight: Option<f64>,
     /// Adaptive decoy rounds: add sampled people who can still read as decoys and solve again.
     #[arg(long)]
     pub adaptive_rounds: Option<u32>,
@@ -636,6 +645,7 @@ pub fn run(cli: Cli) -> Result<()> {
             evaluation_sub_rays,
             only,
             decoy_weight,
+            head_weight,
         }) => {
             let bystanders = eyekey_core::evaluation::BystanderOptions {
                 lateral_mm: lateral,
@@ -653,7 +663,10 @@ pub fn run(cli: Cli) -> Result<()> {
                     max_iterations,
                     evaluation_sub_rays,
                     only.as_deref(),
-                    decoy_weight
+                    crate::research::bystanders::Overrides {
+                        decoy_weight,
+                        head_weight
+                    }
                 )?
             );
         }
@@ -663,10 +676,20 @@ pub fn run(cli: Cli) -> Result<()> {
             max_iterations,
             only,
             decoy_weight,
+            head_weight,
         }) => {
             print!(
                 "{}",
-                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref(), decoy_weight)?
+                crate::research::bystanders::headbox(
+                    &out,
+                    population,
+                    max_iterations,
+                    only.as_deref(),
+                    crate::research::bystanders::Overrides {
+                        decoy_weight,
+                        head_weight
+                    }
+                )?
             );
         }
         Command::Experiment(ExperimentCommand::Encoders {
@@ -870,6 +893,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         lambda_c: a.lambda_c.unwrap_or(d.lambda_c),
         evaluation_population: 0,
         head_radius_mm: a.head_radius.unwrap_or(d.head_radius_mm),
+        head_weight: a.head_weight.unwrap_or(d.head_weight),
         adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
         camera_decoys: a.camera_decoys || d.camera_decoys,
         camera_decoy_ring_mm: a.camera_decoy_ring.unwrap_or(d.camera_decoy_ring_mm),

@@ -44,6 +44,8 @@ struct Encoding {
     camera_ring_mm: f64,
     /// Positions of the target on its ring (`head_positions`).
     head_positions: u32,
+    /// Each ring position's weight (`head_weight`).
+    head_weight: f64,
     /// The encoder's target guard (`ensure_target_reads`), as a job has it.
     guard: bool,
 }
@@ -63,6 +65,7 @@ const BASELINE: Encoding = Encoding {
     camera_focus_d: &[-1.0, 0.0, 1.0],
     camera_ring_mm: 0.0,
     head_positions: 4,
+    head_weight: eyekey_core::encoding::options::DEFAULT_HEAD_WEIGHT,
     guard: false,
 };
 
@@ -142,6 +145,7 @@ impl Baseline {
                 decoy_weight: Some(e.decoy_weight),
                 head_radius_mm: e.head_radius_mm,
                 head_positions: e.head_positions,
+                head_weight: e.head_weight,
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: e.camera_focus_d.to_vec(),
@@ -276,7 +280,7 @@ pub fn run(
     max_iterations: u32,
     sub_rays: u32,
     only: Option<&str>,
-    decoy_weight: Option<f64>,
+    overrides: Overrides,
 ) -> Result<String> {
     bystanders.validate().map_err(|e| anyhow::anyhow!("bystanders: {e}"))?;
     if bystanders.lateral_mm.is_empty()
@@ -521,7 +525,7 @@ pub fn run(
         if only.is_some_and(|f| !e.label.contains(f)) {
             continue;
         }
-        let (e, label) = &with_decoy_weight(e, decoy_weight);
+        let (e, label) = &overrides.apply(e);
         let (l, t_encode) = base.encode(e, max_iterations)?;
         let options = EvaluationOptions {
             population: 0,
@@ -598,14 +602,28 @@ pub(super) enum HeadBoxMethod {
     Tracked,
 }
 
-/// `e` with its decoys at `weight` when one is given (and it has decoys), and its label saying so.
-fn with_decoy_weight(e: &Encoding, weight: Option<f64>) -> (Encoding, String) {
-    match weight {
-        Some(w) if e.decoys + e.near_pupil > 0 => (
-            Encoding { decoy_weight: w, ..*e },
-            format!("{}, decoys at weight {w}", e.label),
-        ),
-        _ => (*e, e.label.to_string()),
+/// Weights that replace every encoding's own (`--decoy-weight`, `--head-weight`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Overrides {
+    /// The decoys' weight.
+    pub decoy_weight: Option<f64>,
+    /// Each head-box ring position's weight.
+    pub head_weight: Option<f64>,
+}
+
+impl Overrides {
+    /// `e` with the weights given (where it has decoys, and a ring), and its label saying so.
+    fn apply(&self, e: &Encoding) -> (Encoding, String) {
+        let (mut e, mut label) = (*e, e.label.to_string());
+        if let Some(w) = self.decoy_weight.filter(|_| e.decoys + e.near_pupil > 0) {
+            e.decoy_weight = w;
+            label += &format!(", decoys at weight {w}");
+        }
+        if let Some(w) = self.head_weight.filter(|_| e.head_radius_mm > 0.0) {
+            e.head_weight = w;
+            label += &format!(", ring positions at weight {w}");
+        }
+        (e, label)
     }
 }
 
@@ -656,7 +674,7 @@ pub fn headbox(
     population: u32,
     max_iterations: u32,
     only: Option<&str>,
-    decoy_weight: Option<f64>,
+    overrides: Overrides,
 ) -> Result<String> {
     std::fs::create_dir_all(out)?;
     let base = Baseline::new()?;
@@ -1042,7 +1060,7 @@ pub fn headbox(
                 }
             }
         };
-        let (encoding, label) = &with_decoy_weight(&encoding, decoy_weight);
+        let (encoding, label) = &overrides.apply(&encoding);
         let (l, t_encode) = base.encode(encoding, max_iterations)?;
         let (ev, t_eval) = base.evaluate(
             &l,

@@ -122,6 +122,9 @@ pub struct EncodeOptions {
     /// Eye positions on the head-movement ring, evenly spaced from the right (4 = right, left, up, down).
     #[cfg_attr(feature = "openapi", schema(minimum = 3, maximum = 16))]
     pub head_positions: u32,
+    /// The weight of each head-movement position's term, relative to the design position's 1.
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 4.0))]
+    pub head_weight: f64,
     /// Adaptive decoy rounds: after each solve, sample `adaptive_candidates` fresh people and add up to
     /// `adaptive_per_round` of those who can still read as decoys, then solve again (0 = off).
     #[cfg_attr(feature = "openapi", schema(maximum = 5))]
@@ -196,6 +199,7 @@ impl Default for EncodeOptions {
             evaluation_population: 20,
             head_radius_mm: 0.0,
             head_positions: 4,
+            head_weight: DEFAULT_HEAD_WEIGHT,
             adaptive_rounds: 0,
             adaptive_candidates: 24,
             adaptive_per_round: 4,
@@ -215,6 +219,9 @@ impl Default for EncodeOptions {
 /// 100 of 11,000 held-out people at the target's seat read its frames with the decoys at 0.5, against 135 at
 /// [`DEFAULT_DECOY_WEIGHT`], and every target reads (docs/experiments.md §2e).
 pub const SECURE_DECOY_WEIGHT: f64 = 0.5;
+
+/// Each head-movement position's weight by default: a quarter of the design position's.
+pub const DEFAULT_HEAD_WEIGHT: f64 = 0.25;
 
 /// The decoys' weight on every other display when none is asked for. Over every preset's held-out targets 0.5
 /// let more people read than 0.3 (22 of 540 against 15; docs/experiments.md §2e).
@@ -307,6 +314,9 @@ impl EncodeOptions {
                 "head_radius_mm",
                 format!("must be within 0..=20 mm, got {}", self.head_radius_mm),
             );
+        }
+        if !(self.head_weight.is_finite() && (0.0..=4.0).contains(&self.head_weight)) {
+            return bad("head_weight", format!("must be within 0..=4, got {}", self.head_weight));
         }
         if !(3..=16).contains(&self.head_positions) {
             return bad(
@@ -411,5 +421,25 @@ mod tests {
             assert!(e.contains("decoy_weight"), "{e}");
         }
         assert!(EncodeOptions::default().validate().is_ok());
+    }
+
+    #[test]
+    fn a_head_weight_out_of_range_is_refused_by_name_and_a_quarter_is_the_default() {
+        assert_eq!(EncodeOptions::default().head_weight, 0.25);
+        for w in [-0.01, 4.01, f64::NAN] {
+            let o = EncodeOptions {
+                head_weight: w,
+                ..Default::default()
+            };
+            let e = o.validate().unwrap_err().to_string();
+            assert!(e.contains("head_weight"), "{e}");
+        }
+        for w in [0.0, 0.4, 4.0] {
+            let o = EncodeOptions {
+                head_weight: w,
+                ..Default::default()
+            };
+            assert!(o.validate().is_ok(), "{w}");
+        }
     }
 }

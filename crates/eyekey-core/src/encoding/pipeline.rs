@@ -507,7 +507,7 @@ fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
 }
 
 /// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
-/// is asked for the document with a quarter of the central weight.
+/// is asked for the document with weight `head_weight` (a quarter of the central weight by default).
 fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let r = spec.options.head_radius_mm;
     if r <= 0.0 {
@@ -621,7 +621,7 @@ fn solve_round(
         terms.push(Term {
             observer: m,
             objective: cast.target_objective.clone(),
-            weight: 0.25,
+            weight: o.head_weight,
             leak: None,
         });
     }
