@@ -156,6 +156,10 @@ pub enum ExperimentCommand {
         /// Every head-box encoding's ring positions at this weight instead of 0.25 (its label then says so).
         #[arg(long)]
         head_weight: Option<f64>,
+        /// Every encoding with this encoder seed instead of 5 (its label then says so; the people and cameras
+        /// who look are the same).
+        #[arg(long)]
+        seed: Option<u64>,
     },
     /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
     /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
@@ -179,6 +183,10 @@ pub enum ExperimentCommand {
         /// Every row's ring positions at this weight instead of 0.25 (its label then says so).
         #[arg(long)]
         head_weight: Option<f64>,
+        /// Every row with this encoder seed instead of 5 (its label then says so; the people who look are the
+        /// same).
+        #[arg(long)]
+        seed: Option<u64>,
     },
     /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
     /// the share of held-out people and of camera settings at the target's position that read.
@@ -235,6 +243,10 @@ pub enum ExperimentCommand {
         /// Instead of the default: the known-font margin the target guard asks of the target's view.
         #[arg(long)]
         target_margin: Option<f64>,
+        /// Instead of the default (1): the encoder's seed, which draws the population decoys, the noise they are
+        /// shown and the kernels' sub-rays (the held-out targets and people stay the same).
+        #[arg(long)]
+        seed: Option<u64>,
         /// Instead of the default: rounds that add as decoys the sampled candidates who still read
         /// (`adaptive_rounds`).
         #[arg(long)]
@@ -646,6 +658,7 @@ pub fn run(cli: Cli) -> Result<()> {
             only,
             decoy_weight,
             head_weight,
+            seed,
         }) => {
             let bystanders = eyekey_core::evaluation::BystanderOptions {
                 lateral_mm: lateral,
@@ -665,7 +678,8 @@ pub fn run(cli: Cli) -> Result<()> {
                     only.as_deref(),
                     crate::research::bystanders::Overrides {
                         decoy_weight,
-                        head_weight
+                        head_weight,
+                        seed
                     }
                 )?
             );
@@ -677,6 +691,7 @@ pub fn run(cli: Cli) -> Result<()> {
             only,
             decoy_weight,
             head_weight,
+            seed,
         }) => {
             print!(
                 "{}",
@@ -687,7 +702,8 @@ pub fn run(cli: Cli) -> Result<()> {
                     only.as_deref(),
                     crate::research::bystanders::Overrides {
                         decoy_weight,
-                        head_weight
+                        head_weight,
+                        seed
                     }
                 )?
             );
@@ -717,6 +733,7 @@ pub fn run(cli: Cli) -> Result<()> {
             sub_rays,
             target_margin,
             adaptive_rounds,
+            seed,
         }) => {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
@@ -728,6 +745,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 sub_rays: sub_rays.unwrap_or(d.sub_rays),
                 target_margin: target_margin.unwrap_or(d.target_margin),
                 adaptive_rounds: adaptive_rounds.unwrap_or(d.adaptive_rounds),
+                seed: seed.unwrap_or(d.seed),
                 ..d
             };
             print!(

@@ -46,6 +46,8 @@ struct Encoding {
     head_positions: u32,
     /// Each ring position's weight (`head_weight`).
     head_weight: f64,
+    /// The encoder's seed (its decoys' noise and people, the kernels' draws).
+    seed: u64,
     /// The encoder's target guard (`ensure_target_reads`), as a job has it.
     guard: bool,
 }
@@ -66,6 +68,7 @@ const BASELINE: Encoding = Encoding {
     camera_ring_mm: 0.0,
     head_positions: 4,
     head_weight: eyekey_core::encoding::options::DEFAULT_HEAD_WEIGHT,
+    seed: 5,
     guard: false,
 };
 
@@ -146,6 +149,7 @@ impl Baseline {
                 head_radius_mm: e.head_radius_mm,
                 head_positions: e.head_positions,
                 head_weight: e.head_weight,
+                seed: e.seed,
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: e.camera_focus_d.to_vec(),
@@ -602,13 +606,15 @@ pub(super) enum HeadBoxMethod {
     Tracked,
 }
 
-/// Weights that replace every encoding's own (`--decoy-weight`, `--head-weight`).
+/// Weights and the seed that replace every encoding's own (`--decoy-weight`, `--head-weight`, `--seed`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Overrides {
     /// The decoys' weight.
     pub decoy_weight: Option<f64>,
     /// Each head-box ring position's weight.
     pub head_weight: Option<f64>,
+    /// The encoder's seed.
+    pub seed: Option<u64>,
 }
 
 impl Overrides {
@@ -622,6 +628,10 @@ impl Overrides {
         if let Some(w) = self.head_weight.filter(|_| e.head_radius_mm > 0.0) {
             e.head_weight = w;
             label += &format!(", ring positions at weight {w}");
+        }
+        if let Some(seed) = self.seed {
+            e.seed = seed;
+            label += &format!(", encoder seed {seed}");
         }
         (e, label)
     }
