@@ -150,16 +150,8 @@ pub enum ExperimentCommand {
         /// Only the encodings whose label contains this text.
         #[arg(long)]
         only: Option<String>,
-        /// Every encoding's decoys at this weight instead of its own (its label then says so).
-        #[arg(long)]
-        decoy_weight: Option<f64>,
-        /// Every head-box encoding's ring positions at this weight instead of 0.25 (its label then says so).
-        #[arg(long)]
-        head_weight: Option<f64>,
-        /// Every encoding with this encoder seed instead of 5 (its label then says so; the people and cameras
-        /// who look are the same).
-        #[arg(long)]
-        seed: Option<u64>,
+        #[command(flatten)]
+        overrides: crate::research::bystanders::Overrides,
     },
     /// The target's head box on the wave sweep's lenslet baseline: fixed frames, frames re-indexed for the
     /// tracked eye, and the target stacked on rings; with the share of people at the design position who read.
@@ -177,16 +169,8 @@ pub enum ExperimentCommand {
         /// written to `headbox-only.md`).
         #[arg(long)]
         only: Option<String>,
-        /// Every row's decoys at this weight instead of 0.3 (its label then says so).
-        #[arg(long)]
-        decoy_weight: Option<f64>,
-        /// Every row's ring positions at this weight instead of 0.25 (its label then says so).
-        #[arg(long)]
-        head_weight: Option<f64>,
-        /// Every row with this encoder seed instead of 5 (its label then says so; the people who look are the
-        /// same).
-        #[arg(long)]
-        seed: Option<u64>,
+        #[command(flatten)]
+        overrides: crate::research::bystanders::Overrides,
     },
     /// The encoder frontier on the wave sweep's lenslet baseline: each encoder variant's target reading against
     /// the share of held-out people and of camera settings at the target's position that read.
@@ -656,9 +640,7 @@ pub fn run(cli: Cli) -> Result<()> {
             max_iterations,
             evaluation_sub_rays,
             only,
-            decoy_weight,
-            head_weight,
-            seed,
+            overrides,
         }) => {
             let bystanders = eyekey_core::evaluation::BystanderOptions {
                 lateral_mm: lateral,
@@ -676,11 +658,7 @@ pub fn run(cli: Cli) -> Result<()> {
                     max_iterations,
                     evaluation_sub_rays,
                     only.as_deref(),
-                    crate::research::bystanders::Overrides {
-                        decoy_weight,
-                        head_weight,
-                        seed
-                    }
+                    overrides
                 )?
             );
         }
@@ -689,23 +667,11 @@ pub fn run(cli: Cli) -> Result<()> {
             population,
             max_iterations,
             only,
-            decoy_weight,
-            head_weight,
-            seed,
+            overrides,
         }) => {
             print!(
                 "{}",
-                crate::research::bystanders::headbox(
-                    &out,
-                    population,
-                    max_iterations,
-                    only.as_deref(),
-                    crate::research::bystanders::Overrides {
-                        decoy_weight,
-                        head_weight,
-                        seed
-                    }
-                )?
+                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref(), overrides)?
             );
         }
         Command::Experiment(ExperimentCommand::Encoders {

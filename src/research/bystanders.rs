@@ -606,14 +606,17 @@ pub(super) enum HeadBoxMethod {
     Tracked,
 }
 
-/// Weights and the seed that replace every encoding's own (`--decoy-weight`, `--head-weight`, `--seed`).
-#[derive(Clone, Copy, Debug, Default)]
+/// Weights and the seed that replace every encoding's own; each label then says so.
+#[derive(Clone, Copy, Debug, Default, clap::Args)]
 pub struct Overrides {
-    /// The decoys' weight.
+    /// Every encoding's decoys at this weight instead of its own (0.3 but where a label says otherwise).
+    #[arg(long)]
     pub decoy_weight: Option<f64>,
-    /// Each head-box ring position's weight.
+    /// Every head-box encoding's ring positions at this weight instead of 0.25.
+    #[arg(long)]
     pub head_weight: Option<f64>,
-    /// The encoder's seed.
+    /// Every encoding with this encoder seed instead of 5 (the people and cameras who look are the same).
+    #[arg(long)]
     pub seed: Option<u64>,
 }
 
