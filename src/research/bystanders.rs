@@ -516,12 +516,6 @@ pub fn run(
             near_pupil: 6,
             ..BASELINE
         },
-        Encoding {
-            label: "decoys at 0.5 (secure's default weight), 6 near-pupil decoys also on a 0.8 mm ring, target at 6 positions on a 0.3 mm ring, camera decoys at −1, 0, +2 D (4 mm) also on a 0.8 mm ring (a tracked head box)",
-            head_positions: 6,
-            decoy_weight: eyekey_core::encoding::options::SECURE_DECOY_WEIGHT,
-            ..BOTH_RINGS
-        },
     ];
     let mut md = String::new();
     let mut all = Vec::new();
@@ -979,63 +973,41 @@ pub fn headbox(
         3.0,
         true,
     )];
-    // The 6-position row with the decoys at `secure`'s own default weight, 0.5 (`SECURE_DECOY_WEIGHT`), instead of
-    // 0.3: the heavier decoys took the seat from 135 to 100 readers of 11,000 (§2e); here, do they take the last
-    // camera setting at 14.4 mm, and what do they cost the target's ring?
-    let with_six_stacked_secure_weight = [(
-        "the same with decoys at 0.5 (secure's default weight), leak penalty 3, the target at 6 positions on its 0.3 mm ring (near-pupil and camera decoys also on a 0.8 mm ring), re-indexed for the tracked eye",
-        0.3,
-        HeadBoxMethod::Tracked,
-        3.0,
-        true,
-    )];
     // Each group of rows with what its rows share: near-pupil decoys and their ring around the seat, the focus
     // settings of camera decoys also on a ring (empty: no such ring), the target's positions on its ring, the
-    // camera decoys' ring radius, their apertures (the first `camera_decoy_aperture_mm`, the rest extra) and the
-    // decoys' weight.
-    type Shared = (u32, f64, &'static [f64], u32, f64, &'static [f64], f64);
-    let groups: [(&[HeadBoxRow], Shared); 12] = [
-        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, &[4.0], 0.3)),
-        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, &[4.0], 0.3)),
-        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, &[4.0], 0.3)),
-        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, &[4.0], 0.3)),
-        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, &[4.0], 0.3)),
-        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, &[4.0], 0.3)),
-        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0], 0.3)),
+    // camera decoys' ring radius and their apertures (the first `camera_decoy_aperture_mm`, the rest extra). Other
+    // decoy weights, ring weights and seeds: `Overrides`.
+    type Shared = (u32, f64, &'static [f64], u32, f64, &'static [f64]);
+    let groups: [(&[HeadBoxRow], Shared); 11] = [
+        (&without_near_pupil, (0, 0.0, &[], 4, 0.8, &[4.0])),
+        (&with_near_pupil, (6, 0.0, &[], 4, 0.8, &[4.0])),
+        (&with_seat_ring, (6, 0.8, &[], 4, 0.8, &[4.0])),
+        (&with_camera_ring, (6, 0.0, &[0.0, 2.0], 4, 0.8, &[4.0])),
+        (&with_both_rings, (6, 0.8, &[-1.0, 0.0, 2.0], 4, 0.8, &[4.0])),
+        (&with_eight_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 8, 0.8, &[4.0])),
+        (&with_six_stacked, (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0])),
         (
             &with_six_stacked_far_focus,
-            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, &[4.0], 0.3),
+            (6, 0.8, &[-3.0, -1.0, 0.0, 2.0], 6, 0.8, &[4.0]),
         ),
         (
             &with_six_stacked_wider_camera_ring,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, &[4.0], 0.3),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 1.2, &[4.0]),
         ),
         (
             &with_six_stacked_wide_camera_decoys,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[8.0], 0.3),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[8.0]),
         ),
         (
             &with_six_stacked_two_apertures,
-            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0, 8.0], 0.3),
-        ),
-        (
-            &with_six_stacked_secure_weight,
-            (
-                6,
-                0.8,
-                &[-1.0, 0.0, 2.0],
-                6,
-                0.8,
-                &[4.0],
-                eyekey_core::encoding::options::SECURE_DECOY_WEIGHT,
-            ),
+            (6, 0.8, &[-1.0, 0.0, 2.0], 6, 0.8, &[4.0, 8.0]),
         ),
     ];
     let rows = groups
         .into_iter()
-        .flat_map(|(rows, (np, np_ring, focus, positions, ring, aperture, weight))| {
+        .flat_map(|(rows, (np, np_ring, focus, positions, ring, aperture))| {
             rows.iter()
-                .map(move |&row| (row, np, np_ring, focus, positions, ring, aperture, weight))
+                .map(move |&row| (row, np, np_ring, focus, positions, ring, aperture))
         });
     for (
         (label, head_radius_mm, method, leak_weight, cameras),
@@ -1045,7 +1017,6 @@ pub fn headbox(
         head_positions,
         camera_ring_mm,
         camera_apertures_mm,
-        row_weight,
     ) in rows
     {
         if only.is_some_and(|f| !f.split('|').any(|part| label.contains(part))) {
@@ -1054,7 +1025,7 @@ pub fn headbox(
         let encoding = Encoding {
             label,
             decoys: 6,
-            decoy_weight: row_weight,
+            decoy_weight: 0.3,
             head_radius_mm,
             leak_weight,
             cameras,

@@ -220,12 +220,12 @@ impl Default for EncodeOptions {
 /// [`DEFAULT_DECOY_WEIGHT`], and every target reads (docs/experiments.md §2e).
 pub const SECURE_DECOY_WEIGHT: f64 = 0.5;
 
-/// Each head-movement position's weight by default: a quarter of the design position's.
-pub const DEFAULT_HEAD_WEIGHT: f64 = 0.25;
-
 /// The decoys' weight on every other display when none is asked for. Over every preset's held-out targets 0.5
 /// let more people read than 0.3 (22 of 540 against 15; docs/experiments.md §2e).
 pub const DEFAULT_DECOY_WEIGHT: f64 = 0.3;
+
+/// Each head-movement position's weight by default: a quarter of the design position's.
+pub const DEFAULT_HEAD_WEIGHT: f64 = 0.25;
 
 impl EncodeOptions {
     /// The decoys' weight when the options give none: [`SECURE_DECOY_WEIGHT`] on the `secure` design (a display
