@@ -75,10 +75,12 @@ fn sq_norm(v: &[f32]) -> f64 {
 }
 
 /// One term's scratch buffers, reused across evaluations (the solver calls the objective from one thread at a
-/// time): its retinal image and its share of the gradient.
+/// time): its retinal image and its share of the gradient, as a light field or (where every term's products
+/// run by stencils) as its adjoint's per-view planes.
 struct Scratch {
     image: Vec<f32>,
     field: Vec<f32>,
+    planes: Vec<f32>,
 }
 
 /// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖²/P over the P unknowns.
@@ -87,6 +89,9 @@ pub struct MultiplexObjective<'a> {
     n_unknowns: usize,
     scale: f64,
     tikhonov: f64,
+    /// The padding of one light field gathered for every term's forward products, when all of them run by
+    /// stencils (then the adjoints are combined per view and written into the gradient once).
+    gather_pad: Option<usize>,
     scratch: Mutex<Vec<Scratch>>,
 }
 
@@ -97,11 +102,24 @@ impl<'a> MultiplexObjective<'a> {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
+        let gather_pad = terms
+            .iter()
+            .map(|t| t.observer.gather_pad())
+            .try_fold(0, |pad, p| p.map(|p| pad.max(p)));
         let scratch = terms
             .iter()
             .map(|t| Scratch {
                 image: vec![0f32; t.observer.n_pixels() * 3],
-                field: vec![0f32; n_unknowns],
+                field: if gather_pad.is_some() {
+                    Vec::new()
+                } else {
+                    vec![0f32; n_unknowns]
+                },
+                planes: if gather_pad.is_some() {
+                    vec![0f32; t.observer.planes_len()]
+                } else {
+                    Vec::new()
+                },
             })
             .collect();
         Self {
@@ -109,6 +127,7 @@ impl<'a> MultiplexObjective<'a> {
             n_unknowns,
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
+            gather_pad,
             scratch: Mutex::new(scratch),
         }
     }
@@ -136,13 +155,35 @@ impl Objective for MultiplexObjective<'_> {
 
     fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(pad) = self.gather_pad {
+            // The light field gathered once for every term; each term's adjoint kept per view and all of them
+            // added into the gradient in one pass (the same sums in the same order as below).
+            let source = self.terms[0].observer.gather(l, pad);
+            let values: Vec<f64> = self
+                .terms
+                .par_iter()
+                .zip(scratch.par_iter_mut())
+                .map(|(t, s)| {
+                    t.observer.forward_gathered(&source, l, &mut s.image);
+                    let f = t.value_and_gradient_image(&mut s.image);
+                    t.observer.adjoint_planes(&s.image, &mut s.planes);
+                    f
+                })
+                .collect();
+            let mut f = self.tikhonov * sq_norm(l);
+            for v in values {
+                f += self.scale * v;
+            }
+            self.combine_planes(l, &scratch, grad);
+            return f;
+        }
         // The terms run side by side (each product is itself parallel, and an idle thread takes over part of
         // another term's), then their fields are summed in the terms' order, as one term after another would.
         let values: Vec<f64> = self
             .terms
             .par_iter()
             .zip(scratch.par_iter_mut())
-            .map(|(t, Scratch { image, field })| {
+            .map(|(t, Scratch { image, field, .. })| {
                 t.observer.forward_lms(l, image);
                 let f = t.value_and_gradient_image(image);
                 t.observer.adjoint_lms(image, field);
@@ -159,10 +200,20 @@ impl Objective for MultiplexObjective<'_> {
 
     fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(pad) = self.gather_pad {
+            let source = self.terms[0].observer.gather(v, pad);
+            self.terms.par_iter().zip(scratch.par_iter_mut()).for_each(|(t, s)| {
+                t.observer.forward_gathered(&source, v, &mut s.image);
+                t.curvature_image(&mut s.image);
+                t.observer.adjoint_planes(&s.image, &mut s.planes);
+            });
+            self.combine_planes(v, &scratch, out);
+            return;
+        }
         self.terms
             .par_iter()
             .zip(scratch.par_iter_mut())
-            .for_each(|(t, Scratch { image, field })| {
+            .for_each(|(t, Scratch { image, field, .. })| {
                 t.observer.forward_lms(v, image);
                 t.curvature_image(image);
                 t.observer.adjoint_lms(image, field);
@@ -172,6 +223,27 @@ impl Objective for MultiplexObjective<'_> {
 }
 
 impl MultiplexObjective<'_> {
+    /// [`Self::combine`] from the terms' per-view adjoints ([`Observer::adjoint_planes`]).
+    fn combine_planes(&self, x: &[f32], scratch: &[Scratch], out: &mut [f32]) {
+        let st = self.terms[0].observer.transports[0]
+            .stencil()
+            .expect("gathered products run by stencils");
+        let planes: Vec<&[f32]> = scratch.iter().map(|s| s.planes.as_slice()).collect();
+        let n_bands = self.terms[0].observer.coupling.len();
+        st.combine_planes(x, self.tikhonov as f32, self.scale as f32, &planes, n_bands, out);
+    }
+
+    /// The same objective computed one term's light field at a time (the path for operators that do not all
+    /// run by stencils), to check the gathered path against.
+    #[cfg(test)]
+    fn without_gathering(mut self) -> Self {
+        self.gather_pad = None;
+        for s in self.scratch.get_mut().unwrap().iter_mut() {
+            s.field = vec![0f32; self.n_unknowns];
+        }
+        self
+    }
+
     /// `out` = 2μ·x + Σ_k scale·field_k, the terms added in order.
     fn combine(&self, x: &[f32], scratch: &[Scratch], out: &mut [f32]) {
         let mu = self.tikhonov as f32;
@@ -507,6 +579,85 @@ mod tests {
         let tied = TiedViews::new(&dm, &d);
         let xt: Vec<f32> = (0..tied.dim()).map(|i| 0.2 + (i % 3) as f32 * 0.2).collect();
         fd_check(&tied, &xt);
+    }
+
+    /// The gathered path (one light field gathered for every term, the adjoints combined per view) gives the
+    /// value, gradient and curvature product of the one-term-at-a-time path bit for bit, with stencil and FFT
+    /// products mixed.
+    #[test]
+    fn gathering_the_light_field_once_changes_no_bit() {
+        use crate::physics::transport::ProductMethod;
+        let d = small_display();
+        // The target's products by stencils, the other's band 0 by FFT (as an operator's cost model may pick).
+        let by = |o: Observer, fft_bands: usize| Observer {
+            transports: o
+                .transports
+                .iter()
+                .enumerate()
+                .map(|(n, t)| {
+                    let m = if n < fft_bands {
+                        ProductMethod::Fft
+                    } else {
+                        ProductMethod::Stencil
+                    };
+                    std::sync::Arc::new(t.with_product_method(m))
+                })
+                .collect(),
+            ..o
+        };
+        let t = by(observer(&d, 0.1, 0.2, vec![], Optics::Wave), 0);
+        let r = by(observer(&d, -0.9, 0.0, vec![], Optics::Wave), 1);
+        let (pt, pr) = (t.gather_pad().unwrap(), r.gather_pad().unwrap());
+        assert_ne!(pt, pr, "operators of different padding read one gathered field");
+        let n = t.n_samples() * d.n_bands();
+        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
+        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
+        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
+        let g = t.grid();
+        let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
+        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        let mk = || {
+            MultiplexObjective::new(
+                vec![
+                    Term {
+                        observer: &t,
+                        objective: obj_t.clone(),
+                        weight: 1.0,
+                        leak: None,
+                    },
+                    Term {
+                        observer: &r,
+                        objective: vec![0.2; r.n_pixels() * 3],
+                        weight: 0.5,
+                        leak: Some((&leak, 0.7)),
+                    },
+                    Term {
+                        observer: &t,
+                        objective: vec![0.4; t.n_pixels() * 3],
+                        weight: 0.3,
+                        leak: None,
+                    },
+                ],
+                d.n_bands(),
+                3.0,
+                1e-3,
+            )
+        };
+        let (gathered, plain) = (mk(), mk().without_gathering());
+        assert_eq!(gathered.gather_pad, Some(pt.max(pr)));
+        let run = |o: &MultiplexObjective| {
+            let (mut grad, mut hv) = (vec![0f32; n], vec![0f32; n]);
+            let f = o.value_and_gradient(&x, &mut grad);
+            o.curvature_product(&v, &mut hv);
+            (
+                f.to_bits(),
+                grad.iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
+                hv.iter().map(|h| h.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        let (a, b) = (run(&gathered), run(&plain));
+        assert!(a.1.iter().any(|g| *g != 0) && a.2.iter().any(|h| *h != 0));
+        assert_eq!(a, b);
     }
 
     #[test]

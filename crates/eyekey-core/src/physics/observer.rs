@@ -10,7 +10,8 @@ use crate::physics::display::DisplayGeometry;
 use crate::physics::profile::{ProfileError, VisionProfile};
 use crate::physics::spectral::{coupling, ConeFundamentals};
 use crate::physics::transport::{
-    EyePosition, RetinalGrid, TransportCache, TransportError, TransportMatrix, TransportOptions, WaveSampling,
+    EyePosition, GatheredField, RetinalGrid, TransportCache, TransportError, TransportMatrix, TransportOptions,
+    WaveSampling,
 };
 use crate::physics::zernike::ZernikeCoefficients;
 
@@ -148,6 +149,61 @@ impl Observer {
         }
         for (n, t) in self.transports.iter().enumerate() {
             t.adjoint_band_lms(term, y, c.len(), n, c[n], out);
+        }
+    }
+
+    /// The padding a [`GatheredField`] needs for every band's forward product, when each band has its own
+    /// operator held as per-view kernels; `None` otherwise (then only the plain products serve).
+    pub fn gather_pad(&self) -> Option<usize> {
+        if !self.per_band() {
+            return None;
+        }
+        self.transports
+            .iter()
+            .map(|t| t.stencil().map(|st| st.gather_pad()))
+            .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
+    }
+
+    /// Bands of `l` gathered once for the forward products of every observer on this display whose
+    /// [`Self::gather_pad`] is at most `pad`.
+    pub fn gather(&self, l: &[f32], pad: usize) -> GatheredField {
+        let st = self.transports[0].stencil().expect("an operator held as stencils");
+        let n = self.coupling.len();
+        st.gather(l, n, 0..n, pad)
+    }
+
+    /// [`Self::forward_lms`] of `l` with `l` also gathered (`source`): the same image bit for bit
+    /// ([`Self::gather_pad`] must be `Some`).
+    pub fn forward_gathered(&self, source: &GatheredField, l: &[f32], out: &mut [f32]) {
+        let n_bands = self.coupling.len();
+        for (n, t) in self.transports.iter().enumerate() {
+            let st = t.stencil().expect("an operator held as stencils");
+            st.forward_from(None, source, l, n_bands, n, self.coupling[n], n > 0, out);
+        }
+    }
+
+    /// Floats of [`Self::adjoint_planes`]'s output: every band's planes, one band after another.
+    pub fn planes_len(&self) -> usize {
+        self.transports
+            .iter()
+            .map(|t| t.stencil().map_or(0, |st| st.plane_len()))
+            .sum()
+    }
+
+    /// [`Self::adjoint_lms`] before it is written into the light field: band n's
+    /// [`StencilOperator::adjoint_planes`] at `planes[n·plane_len..]` (overwritten; [`Self::gather_pad`] must
+    /// be `Some`).
+    ///
+    /// [`StencilOperator::adjoint_planes`]: crate::physics::transport::StencilOperator::adjoint_planes
+    pub fn adjoint_planes(&self, y: &[f32], planes: &mut [f32]) {
+        assert_eq!(planes.len(), self.planes_len(), "planes length");
+        let mut rest = planes;
+        for (n, t) in self.transports.iter().enumerate() {
+            let st = t.stencil().expect("an operator held as stencils");
+            let (band, tail) = rest.split_at_mut(st.plane_len());
+            band.fill(0.0);
+            st.adjoint_planes(None, y, self.coupling[n], band);
+            rest = tail;
         }
     }
 

@@ -360,6 +360,23 @@ impl FftKernels {
         c: [f32; 3],
         out: &mut [f32],
     ) {
+        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
+        let mut planes = vec![0f32; nu * nv * ny * nx];
+        self.adjoint_planes(views, term, y, c, nx, &mut planes);
+        scatter_views(out, &planes, nx, (nx, ny), (nu, nv), n_bands, band);
+    }
+
+    /// [`Self::adjoint_band`] before it is written into the light field: sample (x, y; view v) at
+    /// `planes[(v·ny + y)·stride + x]` (overwritten; the rest of each row left as it is).
+    pub(crate) fn adjoint_planes(
+        &self,
+        views: &[ViewStencil],
+        term: Option<usize>,
+        y: &[f32],
+        c: [f32; 3],
+        stride: usize,
+        planes: &mut [f32],
+    ) {
         let kernels = self.spectra(views, term);
         let plan = &self.plan;
         let (p, q, k) = (plan.p, plan.q, self.k);
@@ -380,8 +397,8 @@ impl FftKernels {
         // transformed there. Column fx of the full spectrum folds onto fx mod P' and, as the conjugate of
         // column P − fx (the spectrum of a real image), onto (P − fx) mod P'.
         let (ps, qs, hs) = (self.small.p, self.small.q, self.small.h);
-        let mut planes = vec![0f32; nu * nv * ny * nx];
-        planes.par_chunks_mut(ny * nx).enumerate().for_each_init(
+        assert_eq!(planes.len(), nu * nv * ny * stride, "planes length");
+        planes.par_chunks_mut(ny * stride).enumerate().for_each_init(
             || (self.small.scratch(), vec![Complex32::default(); qs]),
             |(s, folded), (v, plane)| {
                 let mut spec = std::mem::take(&mut s.spec);
@@ -409,14 +426,13 @@ impl FftKernels {
                 }
                 let mut img = std::mem::take(&mut s.img);
                 self.small.inverse(&mut spec, 0..ny, &mut img, s);
-                for (r, row) in plane.chunks_exact_mut(nx).enumerate() {
-                    row.copy_from_slice(&img[r * ps..r * ps + nx]);
+                for (r, row) in plane.chunks_exact_mut(stride).enumerate() {
+                    row[..nx].copy_from_slice(&img[r * ps..r * ps + nx]);
                 }
                 s.img = img;
                 s.spec = spec;
             },
         );
-        scatter_views(out, &planes, nx, (nx, ny), (nu, nv), n_bands, band);
     }
 }
 

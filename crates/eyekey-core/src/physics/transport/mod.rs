@@ -37,7 +37,7 @@ pub use grid::{
     EyePosition, RetinalGrid, SubRaySequence, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND,
 };
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
-pub use stencil::{multiply_add_peak_gflops, vector_isa, ProductMethod, StencilOperator};
+pub use stencil::{multiply_add_peak_gflops, vector_isa, GatheredField, ProductMethod, StencilOperator};
 pub use trace::block_seen;
 
 use rayon::prelude::*;
@@ -277,6 +277,14 @@ impl TransportMatrix {
     /// True when T is held as per-view stencils.
     pub fn is_stencil(&self) -> bool {
         matches!(self.repr, Repr::Stencil(_))
+    }
+
+    /// The per-view operator, when T is held so.
+    pub fn stencil(&self) -> Option<&StencilOperator> {
+        match &self.repr {
+            Repr::Sparse(_) => None,
+            Repr::Stencil(st) => Some(st),
+        }
     }
 
     /// How a per-view (stencil-held) operator computes its products; `None` for a traced CSR operator.

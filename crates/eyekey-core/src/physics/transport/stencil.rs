@@ -305,13 +305,15 @@ pub fn vector_isa() -> &'static str {
 
 /// One product's shared inputs: the operator, which values (T or ∂T/∂W_term), the tap groups, and the source
 /// rows (the light field's per-view rows for the forward, the coupled image's per-phase rows for the adjoint),
-/// each `layout.row_len` long with its holes at [pad, pad + nx) and zeros around them, so that no block reads
-/// past a row and taps off the grid meet zeros.
+/// each `row_len` long with its holes at [pad, pad + nx) and zeros around them (`pad` at least the layout's),
+/// so that no block reads past a row and taps off the grid meet zeros.
 struct Pass<'a> {
     op: &'a StencilOperator,
     term: Option<usize>,
     layout: &'a Layout,
     source: &'a [f32],
+    pad: usize,
+    row_len: usize,
 }
 
 impl Layout {
@@ -408,7 +410,7 @@ impl Pass<'_> {
     fn forward_rows_with<const FMA: bool, const B: usize>(&self, gy0: i64, acc: &mut [f32]) {
         let op = self.op;
         let groups = &self.layout.groups;
-        let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
+        let (pad, nb, row_len) = (self.pad, self.layout.nx_blocks, self.row_len);
         let (ny, k) = (op.holes_y, op.k as i64);
         let out_len = op.k * nb;
         for (v, st) in op.views.iter().enumerate() {
@@ -463,7 +465,7 @@ impl Pass<'_> {
     fn adjoint_row_with<const FMA: bool, const B: usize>(&self, row: usize, dst: &mut [f32]) {
         let op = self.op;
         let groups = &self.layout.groups;
-        let (pad, nb, row_len) = (self.layout.pad, self.layout.nx_blocks, self.layout.row_len);
+        let (pad, nb, row_len) = (self.pad, self.layout.nx_blocks, self.row_len);
         let (ny, k) = (op.holes_y, op.k);
         let (v, yy) = (row / ny, row % ny);
         let st = &op.views[v];
@@ -675,19 +677,34 @@ impl StencilOperator {
         if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
             return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
         }
-        let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
-        let layout = &self.layout;
-        let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
-        // Band `band` of the light field as one padded row per (view, y).
-        let mut source = vec![0f32; self.n_views() * ny * row_len];
+        let source = self.gather(l, n_bands, band..band + 1, self.layout.pad);
+        self.forward_gathered(term, &source, band, c, accumulate, out);
+    }
+
+    /// The padding (holes each side of a source row) this operator's stencil products read: a
+    /// [`GatheredField`] padded at least this much serves its forward product.
+    pub fn gather_pad(&self) -> usize {
+        self.layout.pad
+    }
+
+    /// Bands `bands` of the light field `l` laid out as the forward product reads them, padded by `pad` holes
+    /// (at least [`Self::gather_pad`] of every operator that is to read it); the same for every operator on
+    /// this display.
+    pub fn gather(&self, l: &[f32], n_bands: usize, bands: std::ops::Range<usize>, pad: usize) -> GatheredField {
+        assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
+        assert!(bands.end <= n_bands, "bands of the light field");
+        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
+        let row_len = 2 * pad + self.layout.nx_blocks;
+        let per_band = self.n_views() * ny * row_len;
+        let mut rows = vec![0f32; bands.len() * per_band];
         let frame_w = nx * nu;
-        // One task per view row j (its U views' rows are contiguous in `source`); each frame row is read in order.
-        source
-            .par_chunks_mut(nu * ny * row_len)
+        // One task per (band, view row j): its U views' rows are contiguous; each frame row is read in order.
+        rows.par_chunks_mut(nu * ny * row_len)
             .enumerate()
-            .for_each(|(j, rows)| {
+            .for_each(|(task, rows)| {
+                let (band, j) = (bands.start + task / nv, task % nv);
                 for y in 0..ny {
-                    let frame = &l[(y * self.views_v + j) * frame_w * n_bands..][..frame_w * n_bands];
+                    let frame = &l[(y * nv + j) * frame_w * n_bands..][..frame_w * n_bands];
                     // View by view, each destination row written in order: writing the U views' rows side by
                     // side would step `ny·row_len` floats between them, often a multiple of 4 KiB, and their
                     // streams would evict one another from the same cache sets.
@@ -702,11 +719,61 @@ impl StencilOperator {
                     }
                 }
             });
+        GatheredField {
+            pad,
+            row_len,
+            shape: (nx, ny, nu, nv),
+            first_band: bands.start,
+            per_band,
+            rows,
+        }
+    }
+
+    /// [`Self::forward_band`] of light field `l`'s band `band`, by stencils from `source`, `l` gathered once
+    /// for every operator that reads it (the same sums in the same order, so the same image bit for bit), or
+    /// by FFT from `l` where this operator's products run so.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_from(
+        &self,
+        term: Option<usize>,
+        source: &GatheredField,
+        l: &[f32],
+        n_bands: usize,
+        band: usize,
+        c: [f32; 3],
+        accumulate: bool,
+        out: &mut [f32],
+    ) {
+        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
+            assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
+            assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
+            return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
+        }
+        self.forward_gathered(term, source, band, c, accumulate, out);
+    }
+
+    /// The stencils' forward product of band `band` from a gathered light field.
+    fn forward_gathered(
+        &self,
+        term: Option<usize>,
+        source: &GatheredField,
+        band: usize,
+        c: [f32; 3],
+        accumulate: bool,
+        out: &mut [f32],
+    ) {
+        assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
+        let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
+        assert_eq!(source.shape, (nx, ny, nu, self.views_v), "gathered on this display");
+        assert!(source.pad >= self.layout.pad, "gathered with this operator's padding");
+        let nx_blocks = self.layout.nx_blocks;
         let pass = Pass {
             op: self,
             term,
-            layout,
-            source: &source,
+            layout: &self.layout,
+            source: source.band(band),
+            pad: source.pad,
+            row_len: source.row_len,
         };
         let width = nx * k;
         let rows_per_task = (ny * k / (4 * rayon::current_num_threads().max(1))).max(1);
@@ -747,7 +814,45 @@ impl StencilOperator {
         if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
             return f.adjoint_band(&self.views, term, y, n_bands, band, c, out);
         }
-        let (nx, ny, nu, k) = (self.holes_x, self.holes_y, self.views_u, self.k);
+        let mut planes = vec![0f32; self.plane_len()];
+        self.adjoint_planes_by_stencils(term, y, c, &mut planes);
+        let (nx, ny) = (self.holes_x, self.holes_y);
+        scatter_views(
+            out,
+            &planes,
+            self.layout.nx_blocks,
+            (nx, ny),
+            (self.views_u, self.views_v),
+            n_bands,
+            band,
+        );
+    }
+
+    /// Floats of one band's adjoint per view ([`Self::adjoint_planes`]): one row of `plane_stride` a (view, y).
+    pub fn plane_len(&self) -> usize {
+        self.n_views() * self.holes_y * self.layout.nx_blocks
+    }
+
+    /// Floats between a plane's rows.
+    pub fn plane_stride(&self) -> usize {
+        self.layout.nx_blocks
+    }
+
+    /// The adjoint of one band before it is written into the light field: `planes[((j·U + i)·ny + y)·stride +
+    /// x]` = Σ_a c[a]·(Tᵀ y_a) of sample (x, y; view j·U + i), `stride` = [`Self::plane_stride`] (zeros in,
+    /// the adjoint out; what [`Self::adjoint_band`] writes into band `band`, by stencils or FFT as it would).
+    pub fn adjoint_planes(&self, term: Option<usize>, y: &[f32], c: [f32; 3], planes: &mut [f32]) {
+        assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
+        assert_eq!(planes.len(), self.plane_len(), "planes length");
+        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
+            return f.adjoint_planes(&self.views, term, y, c, self.plane_stride(), planes);
+        }
+        self.adjoint_planes_by_stencils(term, y, c, planes);
+    }
+
+    /// The stencils' [`Self::adjoint_planes`] (zeros in).
+    fn adjoint_planes_by_stencils(&self, term: Option<usize>, y: &[f32], c: [f32; 3], planes: &mut [f32]) {
+        let (nx, ny, k) = (self.holes_x, self.holes_y, self.k);
         let layout = &self.layout;
         let (pad, nx_blocks, row_len) = (layout.pad, layout.nx_blocks, layout.row_len);
         let width = nx * k;
@@ -768,13 +873,74 @@ impl StencilOperator {
             term,
             layout,
             source: &source,
+            pad,
+            row_len,
         };
-        let mut planes = vec![0f32; self.n_views() * ny * nx_blocks];
         planes
             .par_chunks_mut(nx_blocks)
             .enumerate()
             .for_each(|(row, dst)| pass.adjoint_row(row, dst));
-        scatter_views(out, &planes, nx_blocks, (nx, ny), (nu, self.views_v), n_bands, band);
+    }
+}
+
+impl StencilOperator {
+    /// `out[p·N + n]` = 2μ·x[p·N + n] + Σ_k c·(term k's band-n adjoint at sample p), the terms added in the
+    /// order given: an objective's gradient from every term's [`Self::adjoint_planes`] (`planes[k]` holds term
+    /// k's N bands one after another, each laid out as this operator's), written into the light field once
+    /// instead of once a term. The same sums in the same order as writing each term's adjoint out
+    /// ([`Self::adjoint_band`]) and adding the light fields, so the same gradient bit for bit.
+    pub fn combine_planes(&self, x: &[f32], mu: f32, c: f32, planes: &[&[f32]], n_bands: usize, out: &mut [f32]) {
+        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
+        let (stride, plane_len) = (self.plane_stride(), self.plane_len());
+        assert_eq!(x.len(), self.n_samples() * n_bands, "light field length");
+        assert_eq!(out.len(), x.len(), "gradient length");
+        assert!(planes.iter().all(|p| p.len() == plane_len * n_bands), "planes length");
+        let frame_w = nx * nu;
+        out.par_chunks_mut(frame_w * n_bands)
+            .zip(x.par_chunks(frame_w * n_bands))
+            .enumerate()
+            .for_each_init(
+                || vec![0f32; nx],
+                |acc, (row, (dst, x))| {
+                    let (yy, j) = (row / nv, row % nv);
+                    for n in 0..n_bands {
+                        for i in 0..nu {
+                            let at = |xx: usize| (xx * nu + i) * n_bands + n;
+                            for (xx, a) in acc.iter_mut().enumerate() {
+                                *a = 2.0 * mu * x[at(xx)];
+                            }
+                            let from = n * plane_len + ((j * nu + i) * ny + yy) * stride;
+                            for p in planes {
+                                for (a, v) in acc.iter_mut().zip(&p[from..from + nx]) {
+                                    *a += c * v;
+                                }
+                            }
+                            for (xx, a) in acc.iter().enumerate() {
+                                dst[at(xx)] = *a;
+                            }
+                        }
+                    }
+                },
+            );
+    }
+}
+
+/// Bands of a light field laid out as the stencils' forward products read them ([`StencilOperator::gather`]):
+/// per band, one row per (view, y) of `row_len` floats with the holes at [pad, pad + nx) and zeros around them.
+pub struct GatheredField {
+    pad: usize,
+    row_len: usize,
+    /// Holes across and down, views across and down.
+    shape: (usize, usize, usize, usize),
+    first_band: usize,
+    per_band: usize,
+    rows: Vec<f32>,
+}
+
+impl GatheredField {
+    fn band(&self, band: usize) -> &[f32] {
+        let at = band.checked_sub(self.first_band).expect("a gathered band");
+        &self.rows[at * self.per_band..(at + 1) * self.per_band]
     }
 }
 
@@ -942,6 +1108,59 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// One light field gathered with the widest padding serves every operator's forward product, and the
+    /// adjoints combined per view give the gradient of writing each out and adding the fields: bit for bit,
+    /// whether an operator's products run by stencils or by FFT.
+    #[test]
+    fn a_shared_gather_and_combined_planes_change_no_bit() {
+        let n_bands = 3;
+        let cs = [[0.7f32, -0.2, 0.4], [0.1, 0.5, 0.3], [0.2, 0.2, -0.6]];
+        for (d, k) in displays()
+            .into_iter()
+            .flat_map(|d| (1..=3).map(move |k| (d.clone(), k)))
+        {
+            // The second operator's products run by FFT: it reads the light field itself, and its adjoint's
+            // planes are combined with the others'.
+            let ops: Vec<StencilOperator> = [11u64, 29, 47]
+                .iter()
+                .zip([ProductMethod::Stencil, ProductMethod::Fft, ProductMethod::Stencil])
+                .map(|(seed, m)| operator(&d, k, seed + k as u64).with_method(m))
+                .collect();
+            let pads: Vec<usize> = ops.iter().map(|o| o.gather_pad()).collect();
+            let pad = *pads.iter().max().unwrap();
+            assert!(pads.iter().any(|p| *p < pad), "k {k}: paddings {pads:?} all equal");
+            let l = random(ops[0].n_samples() * n_bands, 3);
+            let gathered = ops[0].gather(&l, n_bands, 0..n_bands, pad);
+            let (mu, scale) = (0.013f32, 0.77f32);
+            let mut planes = Vec::new();
+            let mut field_sum: Vec<f32> = l.iter().map(|x| 2.0 * mu * x).collect();
+            for (op, seed) in ops.iter().zip(5..) {
+                let (mut plain, mut shared) = (vec![0f32; op.n_pixels() * 3], vec![0f32; op.n_pixels() * 3]);
+                for (n, c) in cs.iter().enumerate() {
+                    op.forward_band(None, &l, n_bands, n, *c, n > 0, &mut plain);
+                    op.forward_from(None, &gathered, &l, n_bands, n, *c, n > 0, &mut shared);
+                }
+                assert!(plain.iter().any(|v| *v != 0.0));
+                assert_eq!(plain, shared, "k {k}: forward");
+                let y = random(op.n_pixels() * 3, seed);
+                let mut field = vec![0f32; l.len()];
+                let mut p = vec![0f32; op.plane_len() * n_bands];
+                for (n, c) in cs.iter().enumerate() {
+                    op.adjoint_band(None, &y, n_bands, n, *c, &mut field);
+                    op.adjoint_planes(None, &y, *c, &mut p[n * op.plane_len()..(n + 1) * op.plane_len()]);
+                }
+                for (o, v) in field_sum.iter_mut().zip(&field) {
+                    *o += scale * v;
+                }
+                planes.push(p);
+            }
+            let refs: Vec<&[f32]> = planes.iter().map(|p| p.as_slice()).collect();
+            let mut combined = vec![0f32; l.len()];
+            ops[0].combine_planes(&l, mu, scale, &refs, n_bands, &mut combined);
+            assert_eq!(combined, field_sum, "k {k}: combined adjoints");
         }
     }
 }
