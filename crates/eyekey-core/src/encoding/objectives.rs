@@ -89,9 +89,12 @@ pub struct MultiplexObjective<'a> {
     n_unknowns: usize,
     scale: f64,
     tikhonov: f64,
-    /// The padding of one light field gathered for every term's forward products, when all of them run by
-    /// stencils (then the adjoints are combined per view and written into the gradient once).
+    /// The padding of one light field gathered for every term's forward products, when all of them are held as
+    /// per-view kernels and some run by stencils (then the adjoints are combined per view and written into the
+    /// gradient once).
     gather_pad: Option<usize>,
+    /// The bands gathered.
+    gathered_bands: Vec<usize>,
     scratch: Mutex<Vec<Scratch>>,
 }
 
@@ -102,10 +105,16 @@ impl<'a> MultiplexObjective<'a> {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
+        // Only the bands some term's stencils read are gathered (FFT products read the light field as it is),
+        // and none where no product runs by stencils.
+        let gathered_bands: Vec<usize> = (0..n_bands)
+            .filter(|&n| terms.iter().any(|t| t.observer.stencil_bands().get(n) == Some(&true)))
+            .collect();
         let gather_pad = terms
             .iter()
             .map(|t| t.observer.gather_pad())
-            .try_fold(0, |pad, p| p.map(|p| pad.max(p)));
+            .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
+            .filter(|_| !gathered_bands.is_empty());
         let scratch = terms
             .iter()
             .map(|t| Scratch {
@@ -128,6 +137,7 @@ impl<'a> MultiplexObjective<'a> {
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
             gather_pad,
+            gathered_bands,
             scratch: Mutex::new(scratch),
         }
     }
@@ -158,7 +168,7 @@ impl Objective for MultiplexObjective<'_> {
         if let Some(pad) = self.gather_pad {
             // The light field gathered once for every term; each term's adjoint kept per view and all of them
             // added into the gradient in one pass (the same sums in the same order as below).
-            let source = self.terms[0].observer.gather(l, pad);
+            let source = self.terms[0].observer.gather(l, &self.gathered_bands, pad);
             let values: Vec<f64> = self
                 .terms
                 .par_iter()
@@ -201,7 +211,7 @@ impl Objective for MultiplexObjective<'_> {
     fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(pad) = self.gather_pad {
-            let source = self.terms[0].observer.gather(v, pad);
+            let source = self.terms[0].observer.gather(v, &self.gathered_bands, pad);
             self.terms.par_iter().zip(scratch.par_iter_mut()).for_each(|(t, s)| {
                 t.observer.forward_gathered(&source, v, &mut s.image);
                 t.curvature_image(&mut s.image);
@@ -588,7 +598,8 @@ mod tests {
     fn gathering_the_light_field_once_changes_no_bit() {
         use crate::physics::transport::ProductMethod;
         let d = small_display();
-        // The target's products by stencils, the other's band 0 by FFT (as an operator's cost model may pick).
+        // Some bands' products by FFT (as an operator's cost model may pick): band 0 for both (not gathered),
+        // band 1 for one of them.
         let by = |o: Observer, fft_bands: usize| Observer {
             transports: o
                 .transports
@@ -605,8 +616,8 @@ mod tests {
                 .collect(),
             ..o
         };
-        let t = by(observer(&d, 0.1, 0.2, vec![], Optics::Wave), 0);
-        let r = by(observer(&d, -0.9, 0.0, vec![], Optics::Wave), 1);
+        let t = by(observer(&d, 0.1, 0.2, vec![], Optics::Wave), 1);
+        let r = by(observer(&d, -0.9, 0.0, vec![], Optics::Wave), 2);
         let (pt, pr) = (t.gather_pad().unwrap(), r.gather_pad().unwrap());
         assert_ne!(pt, pr, "operators of different padding read one gathered field");
         let n = t.n_samples() * d.n_bands();
@@ -645,6 +656,7 @@ mod tests {
         };
         let (gathered, plain) = (mk(), mk().without_gathering());
         assert_eq!(gathered.gather_pad, Some(pt.max(pr)));
+        assert_eq!(gathered.gathered_bands, [1, 2, 3]);
         let run = |o: &MultiplexObjective| {
             let (mut grad, mut hv) = (vec![0f32; n], vec![0f32; n]);
             let f = o.value_and_gradient(&x, &mut grad);

@@ -164,12 +164,19 @@ impl Observer {
             .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
     }
 
-    /// Bands of `l` gathered once for the forward products of every observer on this display whose
+    /// Which bands' products run by stencils (and read a [`GatheredField`]).
+    pub fn stencil_bands(&self) -> Vec<bool> {
+        self.transports
+            .iter()
+            .map(|t| t.product_method() == Some(crate::physics::transport::ProductMethod::Stencil))
+            .collect()
+    }
+
+    /// Bands `bands` of `l` gathered once for the forward products of every observer on this display whose
     /// [`Self::gather_pad`] is at most `pad`.
-    pub fn gather(&self, l: &[f32], pad: usize) -> GatheredField {
+    pub fn gather(&self, l: &[f32], bands: &[usize], pad: usize) -> GatheredField {
         let st = self.transports[0].stencil().expect("an operator held as stencils");
-        let n = self.coupling.len();
-        st.gather(l, n, 0..n, pad)
+        st.gather(l, self.coupling.len(), bands, pad)
     }
 
     /// [`Self::forward_lms`] of `l` with `l` also gathered (`source`): the same image bit for bit

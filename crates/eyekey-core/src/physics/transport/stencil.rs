@@ -677,7 +677,7 @@ impl StencilOperator {
         if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
             return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
         }
-        let source = self.gather(l, n_bands, band..band + 1, self.layout.pad);
+        let source = self.gather(l, n_bands, &[band], self.layout.pad);
         self.forward_gathered(term, &source, band, c, accumulate, out);
     }
 
@@ -690,9 +690,9 @@ impl StencilOperator {
     /// Bands `bands` of the light field `l` laid out as the forward product reads them, padded by `pad` holes
     /// (at least [`Self::gather_pad`] of every operator that is to read it); the same for every operator on
     /// this display.
-    pub fn gather(&self, l: &[f32], n_bands: usize, bands: std::ops::Range<usize>, pad: usize) -> GatheredField {
+    pub fn gather(&self, l: &[f32], n_bands: usize, bands: &[usize], pad: usize) -> GatheredField {
         assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
-        assert!(bands.end <= n_bands, "bands of the light field");
+        assert!(bands.iter().all(|b| *b < n_bands), "bands of the light field");
         let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
         let row_len = 2 * pad + self.layout.nx_blocks;
         let per_band = self.n_views() * ny * row_len;
@@ -702,7 +702,7 @@ impl StencilOperator {
         rows.par_chunks_mut(nu * ny * row_len)
             .enumerate()
             .for_each(|(task, rows)| {
-                let (band, j) = (bands.start + task / nv, task % nv);
+                let (band, j) = (bands[task / nv], task % nv);
                 for y in 0..ny {
                     let frame = &l[(y * nv + j) * frame_w * n_bands..][..frame_w * n_bands];
                     // View by view, each destination row written in order: writing the U views' rows side by
@@ -723,7 +723,7 @@ impl StencilOperator {
             pad,
             row_len,
             shape: (nx, ny, nu, nv),
-            first_band: bands.start,
+            bands: bands.to_vec(),
             per_band,
             rows,
         }
@@ -749,6 +749,11 @@ impl StencilOperator {
             assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
             return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
         }
+        if source.band(band).is_none() {
+            // A band gathered for no one else (an FFT operator's first product runs by stencils).
+            let own = self.gather(l, n_bands, &[band], self.layout.pad);
+            return self.forward_gathered(term, &own, band, c, accumulate, out);
+        }
         self.forward_gathered(term, source, band, c, accumulate, out);
     }
 
@@ -771,7 +776,7 @@ impl StencilOperator {
             op: self,
             term,
             layout: &self.layout,
-            source: source.band(band),
+            source: source.band(band).expect("a gathered band"),
             pad: source.pad,
             row_len: source.row_len,
         };
@@ -932,15 +937,17 @@ pub struct GatheredField {
     row_len: usize,
     /// Holes across and down, views across and down.
     shape: (usize, usize, usize, usize),
-    first_band: usize,
+    /// The bands gathered, in the order their rows are held.
+    bands: Vec<usize>,
     per_band: usize,
     rows: Vec<f32>,
 }
 
 impl GatheredField {
-    fn band(&self, band: usize) -> &[f32] {
-        let at = band.checked_sub(self.first_band).expect("a gathered band");
-        &self.rows[at * self.per_band..(at + 1) * self.per_band]
+    /// Band `band`'s rows, if it was gathered.
+    fn band(&self, band: usize) -> Option<&[f32]> {
+        let at = self.bands.iter().position(|b| *b == band)?;
+        Some(&self.rows[at * self.per_band..(at + 1) * self.per_band])
     }
 }
 
@@ -1133,7 +1140,7 @@ mod tests {
             let pad = *pads.iter().max().unwrap();
             assert!(pads.iter().any(|p| *p < pad), "k {k}: paddings {pads:?} all equal");
             let l = random(ops[0].n_samples() * n_bands, 3);
-            let gathered = ops[0].gather(&l, n_bands, 0..n_bands, pad);
+            let gathered = ops[0].gather(&l, n_bands, &[0, 2], pad);
             let (mu, scale) = (0.013f32, 0.77f32);
             let mut planes = Vec::new();
             let mut field_sum: Vec<f32> = l.iter().map(|x| 2.0 * mu * x).collect();
