@@ -1020,6 +1020,33 @@ impl BenchRun<'_> {
         };
         let near_pupil = spec.options.near_pupil_decoys;
         let scale = encoded.solver.decoy_weight_scale;
+        // A second job on the same server, its transport cache and ray bundles kept from the first: another
+        // held-out person and PIN (the decoys and the evaluation's people are the same draws, the target's and
+        // its near-pupil decoys' operators new).
+        let (document2, text2) = super::experiment::pin_slip_of(display.holes_x * 4, display.holes_y * 4, "5930");
+        let spec2 = JobSpec {
+            target: eyekey_core::physics::population::sample_population(2, 4242, Default::default()).remove(1),
+            document: document2,
+            options: EncodeOptions {
+                document_text: Some(text2),
+                ..spec.options.clone()
+            },
+            ..spec.clone()
+        };
+        let t2 = Instant::now();
+        let encoded2 = pipeline::encode(&spec2, &cache, &|_| {}, &cancel)?;
+        let t2_solved = t2.elapsed().as_secs_f64();
+        let out2 = pipeline::write_outputs(&spec2, &encoded2, &dir.path().join("job2"), true, &cache, &|_| {}, &cancel)?;
+        let second = format!(
+            "| a second job on the same server (caches kept): another held-out person and PIN | {:.1} s (operators \
+             and solve {t2_solved:.1} s, {} iterations; evaluation and bundle {:.1} s; target reads: {}, decoy \
+             weights scaled by {:.3}) |\n",
+            t2.elapsed().as_secs_f64(),
+            encoded2.solver.iterations,
+            t2.elapsed().as_secs_f64() - t2_solved,
+            out2.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false),
+            encoded2.solver.decoy_weight_scale,
+        );
         let cold = evaluate_1000("people's operators built")?;
         let warm = evaluate_1000("people's operators cached")?;
         Ok(format!(
@@ -1031,7 +1058,7 @@ impl BenchRun<'_> {
              decoy weights scaled by {scale:.3}) |\n\
              | of which: target's and decoys' operators | {t_cast:.1} s |\n\
              | of which: solve | {:.1} s ({} iterations, {}; objective {}) |\n\
-             | of which: evaluation and bundle | {:.1} s |\n{cold}{warm}| peak resident memory | {:.0} MB |\n",
+             | of which: evaluation and bundle | {:.1} s |\n{second}{cold}{warm}| peak resident memory | {:.0} MB |\n",
             self.stamp,
             build_kind(),
             spec.options.population_decoys,
