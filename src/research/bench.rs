@@ -1036,7 +1036,15 @@ impl BenchRun<'_> {
         let t2 = Instant::now();
         let encoded2 = pipeline::encode(&spec2, &cache, &|_| {}, &cancel)?;
         let t2_solved = t2.elapsed().as_secs_f64();
-        let out2 = pipeline::write_outputs(&spec2, &encoded2, &dir.path().join("job2"), true, &cache, &|_| {}, &cancel)?;
+        let out2 = pipeline::write_outputs(
+            &spec2,
+            &encoded2,
+            &dir.path().join("job2"),
+            true,
+            &cache,
+            &|_| {},
+            &cancel,
+        )?;
         let second = format!(
             "| a second job on the same server (caches kept): another held-out person and PIN | {:.1} s (operators \
              and solve {t2_solved:.1} s, {} iterations; evaluation and bundle {:.1} s; target reads: {}, decoy \
