@@ -963,31 +963,36 @@ impl BenchRun<'_> {
         let cache = TransportCache::default();
         let dir = tempfile::tempdir()?;
         let cancel = AtomicBool::new(false);
-        // What `run_job` does, in its two steps. The encode's progress marks its stages: 0.15 once the target's
-        // and the decoys' operators are built.
-        let marks = std::sync::Mutex::new(Vec::<(f64, f64)>::new());
-        let t = Instant::now();
-        let encoded = pipeline::encode(
-            &spec,
-            &cache,
-            &|p| {
-                marks
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .push((p, t.elapsed().as_secs_f64()))
-            },
-            &cancel,
-        )?;
-        let t_solved = t.elapsed().as_secs_f64();
-        let out = pipeline::write_outputs(&spec, &encoded, &dir.path().join("job"), true, &cache, &|_| {}, &cancel)?;
-        let total = t.elapsed().as_secs_f64();
-        let marks = marks.into_inner().unwrap_or_else(|e| e.into_inner());
-        let t_cast = marks
-            .iter()
-            .find(|m| m.0 >= 0.15 - 1e-9)
-            .map(|m| m.1)
-            .unwrap_or(t_solved);
-        let target_reads = out.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false);
+        // What `run_job` does, in its two steps, into `dir/name`: the light field, and the seconds until the
+        // operators were built (the encode's progress reaches 0.15 then), until the solve ended and in all, and
+        // whether the target reads.
+        let run_job = |spec: &JobSpec, name: &str| -> Result<(pipeline::Encoded, f64, f64, f64, bool)> {
+            let marks = std::sync::Mutex::new(Vec::<(f64, f64)>::new());
+            let t = Instant::now();
+            let encoded = pipeline::encode(
+                spec,
+                &cache,
+                &|p| {
+                    marks
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push((p, t.elapsed().as_secs_f64()))
+                },
+                &cancel,
+            )?;
+            let t_solved = t.elapsed().as_secs_f64();
+            let out = pipeline::write_outputs(spec, &encoded, &dir.path().join(name), true, &cache, &|_| {}, &cancel)?;
+            let total = t.elapsed().as_secs_f64();
+            let marks = marks.into_inner().unwrap_or_else(|e| e.into_inner());
+            let t_cast = marks
+                .iter()
+                .find(|m| m.0 >= 0.15 - 1e-9)
+                .map(|m| m.1)
+                .unwrap_or(t_solved);
+            let target_reads = out.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false);
+            Ok((encoded, t_cast, t_solved, total, target_reads))
+        };
+        let (encoded, t_cast, t_solved, total, target_reads) = run_job(&spec, "job")?;
         let evaluate_1000 = |label: &str| -> Result<String> {
             let t = Instant::now();
             let ev = eyekey_core::evaluation::evaluate(
@@ -1033,26 +1038,13 @@ impl BenchRun<'_> {
             },
             ..spec.clone()
         };
-        let t2 = Instant::now();
-        let encoded2 = pipeline::encode(&spec2, &cache, &|_| {}, &cancel)?;
-        let t2_solved = t2.elapsed().as_secs_f64();
-        let out2 = pipeline::write_outputs(
-            &spec2,
-            &encoded2,
-            &dir.path().join("job2"),
-            true,
-            &cache,
-            &|_| {},
-            &cancel,
-        )?;
+        let (encoded2, _, t2_solved, total2, reads2) = run_job(&spec2, "job2")?;
         let second = format!(
-            "| a second job on the same server (caches kept): another held-out person and PIN | {:.1} s (operators \
-             and solve {t2_solved:.1} s, {} iterations; evaluation and bundle {:.1} s; target reads: {}, decoy \
-             weights scaled by {:.3}) |\n",
-            t2.elapsed().as_secs_f64(),
+            "| a second job on the same server (caches kept): another held-out person and PIN | {total2:.1} s \
+             (operators and solve {t2_solved:.1} s, {} iterations; evaluation and bundle {:.1} s; target reads: \
+             {reads2}, decoy weights scaled by {:.3}) |\n",
             encoded2.solver.iterations,
-            t2.elapsed().as_secs_f64() - t2_solved,
-            out2.evaluation.as_ref().map(|r| r.target.readable).unwrap_or(false),
+            total2 - t2_solved,
             encoded2.solver.decoy_weight_scale,
         );
         let cold = evaluate_1000("people's operators built")?;

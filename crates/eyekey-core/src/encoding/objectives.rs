@@ -75,12 +75,18 @@ fn sq_norm(v: &[f32]) -> f64 {
 }
 
 /// One term's scratch buffers, reused across evaluations (the solver calls the objective from one thread at a
-/// time): its retinal image and its share of the gradient, as a light field or (where every term's products
-/// run by stencils) as its adjoint's per-view planes.
+/// time): its retinal image and its share of the gradient, as a light field or (where the light field is
+/// gathered) as its adjoint's per-view planes.
 struct Scratch {
     image: Vec<f32>,
-    field: Vec<f32>,
-    planes: Vec<f32>,
+    share: Vec<f32>,
+}
+
+/// The light field gathered once for every term's forward products: its padding (the widest term's) and the
+/// bands gathered (those some term reads by stencils).
+struct Gather {
+    pad: usize,
+    bands: Vec<usize>,
 }
 
 /// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖²/P over the P unknowns.
@@ -89,12 +95,9 @@ pub struct MultiplexObjective<'a> {
     n_unknowns: usize,
     scale: f64,
     tikhonov: f64,
-    /// The padding of one light field gathered for every term's forward products, when all of them are held as
-    /// per-view kernels and some run by stencils (then the adjoints are combined per view and written into the
-    /// gradient once).
-    gather_pad: Option<usize>,
-    /// The bands gathered.
-    gathered_bands: Vec<usize>,
+    /// Where every term's operators are held as per-view kernels and some run by stencils: the light field is
+    /// gathered once for all of them and their adjoints are added into the gradient per view, in one pass.
+    gather: Option<Gather>,
     scratch: Mutex<Vec<Scratch>>,
 }
 
@@ -106,40 +109,51 @@ impl<'a> MultiplexObjective<'a> {
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
         // Only the bands some term's stencils read are gathered (FFT products read the light field as it is),
-        // and none where no product runs by stencils.
-        let gathered_bands: Vec<usize> = (0..n_bands)
-            .filter(|&n| terms.iter().any(|t| t.observer.stencil_bands().get(n) == Some(&true)))
-            .collect();
-        let gather_pad = terms
+        // and nothing where no product runs by stencils.
+        let mut by_stencils = vec![false; n_bands];
+        for t in &terms {
+            for (any, own) in by_stencils.iter_mut().zip(t.observer.stencil_bands()) {
+                *any |= own;
+            }
+        }
+        let bands: Vec<usize> = (0..n_bands).filter(|&n| by_stencils[n]).collect();
+        let gather = terms
             .iter()
             .map(|t| t.observer.gather_pad())
             .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
-            .filter(|_| !gathered_bands.is_empty());
-        let scratch = terms
-            .iter()
-            .map(|t| Scratch {
-                image: vec![0f32; t.observer.n_pixels() * 3],
-                field: if gather_pad.is_some() {
-                    Vec::new()
-                } else {
-                    vec![0f32; n_unknowns]
-                },
-                planes: if gather_pad.is_some() {
-                    vec![0f32; t.observer.planes_len()]
-                } else {
-                    Vec::new()
-                },
-            })
-            .collect();
-        Self {
+            .filter(|_| !bands.is_empty())
+            .map(|pad| Gather { pad, bands });
+        let mut objective = Self {
             terms,
             n_unknowns,
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
-            gather_pad,
-            gathered_bands,
-            scratch: Mutex::new(scratch),
-        }
+            gather,
+            scratch: Mutex::new(Vec::new()),
+        };
+        objective.make_scratch();
+        objective
+    }
+
+    /// Each term's buffers, sized for the path its products take.
+    fn make_scratch(&mut self) {
+        let gathered = self.gather.is_some();
+        let scratch = self
+            .terms
+            .iter()
+            .map(|t| Scratch {
+                image: vec![0f32; t.observer.n_pixels() * 3],
+                share: vec![
+                    0f32;
+                    if gathered {
+                        t.observer.planes_len()
+                    } else {
+                        self.n_unknowns
+                    }
+                ],
+            })
+            .collect();
+        *self.scratch.get_mut().unwrap_or_else(|e| e.into_inner()) = scratch;
     }
 
     pub fn terms(&self) -> &[Term<'a>] {
@@ -164,93 +178,71 @@ impl Objective for MultiplexObjective<'_> {
     }
 
     fn value_and_gradient(&self, l: &[f32], grad: &mut [f32]) -> f64 {
-        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(pad) = self.gather_pad {
-            // The light field gathered once for every term; each term's adjoint kept per view and all of them
-            // added into the gradient in one pass (the same sums in the same order as below).
-            let source = self.terms[0].observer.gather(l, &self.gathered_bands, pad);
-            let values: Vec<f64> = self
-                .terms
-                .par_iter()
-                .zip(scratch.par_iter_mut())
-                .map(|(t, s)| {
-                    t.observer.forward_gathered(&source, l, &mut s.image);
-                    let f = t.value_and_gradient_image(&mut s.image);
-                    t.observer.adjoint_planes(&s.image, &mut s.planes);
-                    f
-                })
-                .collect();
-            let mut f = self.tikhonov * sq_norm(l);
-            for v in values {
-                f += self.scale * v;
-            }
-            self.combine_planes(l, &scratch, grad);
-            return f;
-        }
-        // The terms run side by side (each product is itself parallel, and an idle thread takes over part of
-        // another term's), then their fields are summed in the terms' order, as one term after another would.
-        let values: Vec<f64> = self
-            .terms
-            .par_iter()
-            .zip(scratch.par_iter_mut())
-            .map(|(t, Scratch { image, field, .. })| {
-                t.observer.forward_lms(l, image);
-                let f = t.value_and_gradient_image(image);
-                t.observer.adjoint_lms(image, field);
-                f
-            })
-            .collect();
+        let values = self.each_term(l, grad, |t, image| t.value_and_gradient_image(image));
         let mut f = self.tikhonov * sq_norm(l);
         for v in values {
             f += self.scale * v;
         }
-        self.combine(l, &scratch, grad);
         f
     }
 
     fn curvature_product(&self, v: &[f32], out: &mut [f32]) {
-        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(pad) = self.gather_pad {
-            let source = self.terms[0].observer.gather(v, &self.gathered_bands, pad);
-            self.terms.par_iter().zip(scratch.par_iter_mut()).for_each(|(t, s)| {
-                t.observer.forward_gathered(&source, v, &mut s.image);
-                t.curvature_image(&mut s.image);
-                t.observer.adjoint_planes(&s.image, &mut s.planes);
-            });
-            self.combine_planes(v, &scratch, out);
-            return;
-        }
-        self.terms
-            .par_iter()
-            .zip(scratch.par_iter_mut())
-            .for_each(|(t, Scratch { image, field, .. })| {
-                t.observer.forward_lms(v, image);
-                t.curvature_image(image);
-                t.observer.adjoint_lms(image, field);
-            });
-        self.combine(v, &scratch, out);
+        self.each_term(v, out, |t, image| {
+            t.curvature_image(image);
+            0.0
+        });
     }
 }
 
 impl MultiplexObjective<'_> {
-    /// [`Self::combine`] from the terms' per-view adjoints ([`Observer::adjoint_planes`]).
-    fn combine_planes(&self, x: &[f32], scratch: &[Scratch], out: &mut [f32]) {
-        let st = self.terms[0].observer.transports[0]
-            .stencil()
-            .expect("gathered products run by stencils");
-        let planes: Vec<&[f32]> = scratch.iter().map(|s| s.planes.as_slice()).collect();
-        let n_bands = self.terms[0].observer.coupling.len();
-        st.combine_planes(x, self.tikhonov as f32, self.scale as f32, &planes, n_bands, out);
+    /// For every term: its view of `x`, `at_view` turning it into the image whose adjoint is wanted (and giving
+    /// the term's value), and that adjoint; then `out` = 2μ·x + Σ_k scale·(term k's adjoint). The terms run side
+    /// by side (each product is itself parallel, and an idle thread takes over part of another term's), then
+    /// their adjoints are added in the terms' order, as one term after another would. Where the light field is
+    /// gathered once for all of them, their adjoints are kept per view and added in one pass (the same sums in
+    /// the same order).
+    fn each_term(&self, x: &[f32], out: &mut [f32], at_view: impl Fn(&Term<'_>, &mut [f32]) -> f64 + Sync) -> Vec<f64> {
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let source = self
+            .gather
+            .as_ref()
+            .map(|g| self.terms[0].observer.gather(x, &g.bands, g.pad));
+        let values = self
+            .terms
+            .par_iter()
+            .zip(scratch.par_iter_mut())
+            .map(|(t, Scratch { image, share })| {
+                match &source {
+                    Some(source) => t.observer.forward_gathered(source, x, image),
+                    None => t.observer.forward_lms(x, image),
+                }
+                let f = at_view(t, image);
+                match &source {
+                    Some(_) => t.observer.adjoint_planes(image, share),
+                    None => t.observer.adjoint_lms(image, share),
+                }
+                f
+            })
+            .collect();
+        if source.is_some() {
+            let st = self.terms[0].observer.transports[0]
+                .stencil()
+                .expect("a gathered light field is read by stencils");
+            let planes: Vec<&[f32]> = scratch.iter().map(|s| s.share.as_slice()).collect();
+            let n_bands = self.terms[0].observer.coupling.len();
+            st.combine_planes(x, self.tikhonov as f32, self.scale as f32, &planes, n_bands, out);
+        } else {
+            self.combine(x, &scratch, out);
+        }
+        values
     }
 
-    /// The same objective computed one term's light field at a time (the path for operators that do not all
-    /// run by stencils), to check the gathered path against.
+    /// The same objective computed one term's light field at a time (the path for operators that are not all
+    /// held as per-view kernels), to check the gathered path against.
     #[cfg(test)]
     fn without_gathering(mut self) -> Self {
-        self.gather_pad = None;
-        for s in self.scratch.get_mut().unwrap().iter_mut() {
-            s.field = vec![0f32; self.n_unknowns];
-        }
+        self.gather = None;
+        self.make_scratch();
         self
     }
 
@@ -267,7 +259,7 @@ impl MultiplexObjective<'_> {
                     *o = 2.0 * mu * x;
                 }
                 for s in scratch {
-                    for (o, v) in o.iter_mut().zip(&s.field[n * CHUNK..]) {
+                    for (o, v) in o.iter_mut().zip(&s.share[n * CHUNK..]) {
                         *o += c * v;
                     }
                 }
@@ -510,6 +502,31 @@ mod tests {
         }
     }
 
+    /// The target asked for `obj_t`; `r` as a decoy with a leak penalty; and `r` again as a leak-only decoy (no
+    /// least-squares part at all).
+    fn three_terms<'a>(t: &'a Observer, r: &'a Observer, obj_t: &[f32], leak: &'a LeakPatterns) -> Vec<Term<'a>> {
+        vec![
+            Term {
+                observer: t,
+                objective: obj_t.to_vec(),
+                weight: 1.0,
+                leak: None,
+            },
+            Term {
+                observer: r,
+                objective: vec![0.2; r.n_pixels() * 3],
+                weight: 0.5,
+                leak: Some((leak, 0.7)),
+            },
+            Term {
+                observer: r,
+                objective: vec![],
+                weight: 0.0,
+                leak: Some((leak, 2.0)),
+            },
+        ]
+    }
+
     #[test]
     fn multiplex_and_diffmax_gradients_match_finite_differences() {
         // Under both forward models: wave optics gives every band its own operator (and its own ∂T/∂W_j).
@@ -538,34 +555,7 @@ mod tests {
         });
         let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
         assert!(!leak.is_empty());
-        let mk = || {
-            MultiplexObjective::new(
-                vec![
-                    Term {
-                        observer: &t,
-                        objective: obj_t.clone(),
-                        weight: 1.0,
-                        leak: None,
-                    },
-                    Term {
-                        observer: &r,
-                        objective: vec![0.2; r.n_pixels() * 3],
-                        weight: 0.5,
-                        leak: Some((&leak, 0.7)),
-                    },
-                    // A leak-only decoy: no least-squares part at all.
-                    Term {
-                        observer: &r,
-                        objective: vec![],
-                        weight: 0.0,
-                        leak: Some((&leak, 2.0)),
-                    },
-                ],
-                d.n_bands(),
-                energy,
-                1e-3,
-            )
-        };
+        let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), energy, 1e-3);
         fd_check(&mk(), &x);
         // The multiplex objective is quadratic: its curvature product is the gradient's exact difference.
         let m = mk();
@@ -627,36 +617,10 @@ mod tests {
         let g = t.grid();
         let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
         let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
-        let mk = || {
-            MultiplexObjective::new(
-                vec![
-                    Term {
-                        observer: &t,
-                        objective: obj_t.clone(),
-                        weight: 1.0,
-                        leak: None,
-                    },
-                    Term {
-                        observer: &r,
-                        objective: vec![0.2; r.n_pixels() * 3],
-                        weight: 0.5,
-                        leak: Some((&leak, 0.7)),
-                    },
-                    Term {
-                        observer: &t,
-                        objective: vec![0.4; t.n_pixels() * 3],
-                        weight: 0.3,
-                        leak: None,
-                    },
-                ],
-                d.n_bands(),
-                3.0,
-                1e-3,
-            )
-        };
+        let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
         let (gathered, plain) = (mk(), mk().without_gathering());
-        assert_eq!(gathered.gather_pad, Some(pt.max(pr)));
-        assert_eq!(gathered.gathered_bands, [1, 2, 3]);
+        let g = gathered.gather.as_ref().expect("a gathered light field");
+        assert_eq!((g.pad, g.bands.as_slice()), (pt.max(pr), [1, 2, 3].as_slice()));
         let run = |o: &MultiplexObjective| {
             let (mut grad, mut hv) = (vec![0f32; n], vec![0f32; n]);
             let f = o.value_and_gradient(&x, &mut grad);

@@ -185,7 +185,7 @@ impl Observer {
         let n_bands = self.coupling.len();
         for (n, t) in self.transports.iter().enumerate() {
             let st = t.stencil().expect("an operator held as stencils");
-            st.forward_from(None, source, l, n_bands, n, self.coupling[n], n > 0, out);
+            st.forward_from(None, Some(source), l, n_bands, n, self.coupling[n], n > 0, out);
         }
     }
 
@@ -208,7 +208,6 @@ impl Observer {
         for (n, t) in self.transports.iter().enumerate() {
             let st = t.stencil().expect("an operator held as stencils");
             let (band, tail) = rest.split_at_mut(st.plane_len());
-            band.fill(0.0);
             st.adjoint_planes(None, y, self.coupling[n], band);
             rest = tail;
         }

@@ -672,13 +672,7 @@ impl StencilOperator {
         accumulate: bool,
         out: &mut [f32],
     ) {
-        assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
-        assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
-        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
-            return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
-        }
-        let source = self.gather(l, n_bands, &[band], self.layout.pad);
-        self.forward_gathered(term, &source, band, c, accumulate, out);
+        self.forward_from(term, None, l, n_bands, band, c, accumulate, out);
     }
 
     /// The padding (holes each side of a source row) this operator's stencil products read: a
@@ -729,14 +723,15 @@ impl StencilOperator {
         }
     }
 
-    /// [`Self::forward_band`] of light field `l`'s band `band`, by stencils from `source`, `l` gathered once
-    /// for every operator that reads it (the same sums in the same order, so the same image bit for bit), or
-    /// by FFT from `l` where this operator's products run so.
+    /// [`Self::forward_band`] of light field `l`'s band `band`, by stencils from `source` where it holds the
+    /// band, `l` gathered once for every operator that reads it (the same sums in the same order, so the same
+    /// image bit for bit), else from the band gathered here; by FFT from `l` where this operator's products run
+    /// so.
     #[allow(clippy::too_many_arguments)]
     pub fn forward_from(
         &self,
         term: Option<usize>,
-        source: &GatheredField,
+        source: Option<&GatheredField>,
         l: &[f32],
         n_bands: usize,
         band: usize,
@@ -744,17 +739,19 @@ impl StencilOperator {
         accumulate: bool,
         out: &mut [f32],
     ) {
+        assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
+        assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
         if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
-            assert_eq!(l.len(), self.n_samples() * n_bands, "light field length");
-            assert_eq!(out.len(), self.n_pixels() * 3, "retinal image length");
             return f.forward_band(&self.views, term, l, n_bands, band, c, accumulate, out);
         }
-        if source.band(band).is_none() {
-            // A band gathered for no one else (an FFT operator's first product runs by stencils).
-            let own = self.gather(l, n_bands, &[band], self.layout.pad);
-            return self.forward_gathered(term, &own, band, c, accumulate, out);
+        match source.filter(|s| s.band(band).is_some()) {
+            Some(source) => self.forward_gathered(term, source, band, c, accumulate, out),
+            // A band no one else reads by stencils (or an FFT operator's first product, which runs by them).
+            None => {
+                let own = self.gather(l, n_bands, &[band], self.layout.pad);
+                self.forward_gathered(term, &own, band, c, accumulate, out)
+            }
         }
-        self.forward_gathered(term, source, band, c, accumulate, out);
     }
 
     /// The stencils' forward product of band `band` from a gathered light field.
@@ -844,14 +841,15 @@ impl StencilOperator {
     }
 
     /// The adjoint of one band before it is written into the light field: `planes[((j·U + i)·ny + y)·stride +
-    /// x]` = Σ_a c[a]·(Tᵀ y_a) of sample (x, y; view j·U + i), `stride` = [`Self::plane_stride`] (zeros in,
-    /// the adjoint out; what [`Self::adjoint_band`] writes into band `band`, by stencils or FFT as it would).
+    /// x]` = Σ_a c[a]·(Tᵀ y_a) of sample (x, y; view j·U + i), `stride` = [`Self::plane_stride`] (overwritten:
+    /// what [`Self::adjoint_band`] writes into band `band`, by stencils or FFT as it would).
     pub fn adjoint_planes(&self, term: Option<usize>, y: &[f32], c: [f32; 3], planes: &mut [f32]) {
         assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(planes.len(), self.plane_len(), "planes length");
         if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
             return f.adjoint_planes(&self.views, term, y, c, self.plane_stride(), planes);
         }
+        planes.fill(0.0);
         self.adjoint_planes_by_stencils(term, y, c, planes);
     }
 
@@ -886,9 +884,7 @@ impl StencilOperator {
             .enumerate()
             .for_each(|(row, dst)| pass.adjoint_row(row, dst));
     }
-}
 
-impl StencilOperator {
     /// `out[p·N + n]` = 2μ·x[p·N + n] + Σ_k c·(term k's band-n adjoint at sample p), the terms added in the
     /// order given: an objective's gradient from every term's [`Self::adjoint_planes`] (`planes[k]` holds term
     /// k's N bands one after another, each laid out as this operator's), written into the light field once
@@ -1148,7 +1144,7 @@ mod tests {
                 let (mut plain, mut shared) = (vec![0f32; op.n_pixels() * 3], vec![0f32; op.n_pixels() * 3]);
                 for (n, c) in cs.iter().enumerate() {
                     op.forward_band(None, &l, n_bands, n, *c, n > 0, &mut plain);
-                    op.forward_from(None, &gathered, &l, n_bands, n, *c, n > 0, &mut shared);
+                    op.forward_from(None, Some(&gathered), &l, n_bands, n, *c, n > 0, &mut shared);
                 }
                 assert!(plain.iter().any(|v| *v != 0.0));
                 assert_eq!(plain, shared, "k {k}: forward");
