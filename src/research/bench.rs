@@ -1041,9 +1041,10 @@ impl BenchRun<'_> {
         let (encoded2, _, t2_solved, total2, reads2) = run_job(&spec2, "job2")?;
         let second = format!(
             "| a second job on the same server (caches kept): another held-out person and PIN | {total2:.1} s \
-             (operators and solve {t2_solved:.1} s, {} iterations; evaluation and bundle {:.1} s; target reads: \
-             {reads2}, decoy weights scaled by {:.3}) |\n",
+             (operators and solve {t2_solved:.1} s, {} iterations: {}; evaluation and bundle {:.1} s; target \
+             reads: {reads2}, decoy weights scaled by {:.3}) |\n",
             encoded2.solver.iterations,
+            solves_text(&encoded2.solver.solves),
             total2 - t2_solved,
             encoded2.solver.decoy_weight_scale,
         );
@@ -1057,7 +1058,7 @@ impl BenchRun<'_> {
              | the whole job (`run_job`: encode, evaluation, bundle) | {total:.1} s (target reads: {target_reads}, \
              decoy weights scaled by {scale:.3}) |\n\
              | of which: target's and decoys' operators | {t_cast:.1} s |\n\
-             | of which: solve | {:.1} s ({} iterations, {}; objective {}) |\n\
+             | of which: solve | {:.1} s ({} iterations, {}: {}; objective {}) |\n\
              | of which: evaluation and bundle | {:.1} s |\n{second}{cold}{warm}| peak resident memory | {:.0} MB |\n",
             self.stamp,
             build_kind(),
@@ -1071,6 +1072,7 @@ impl BenchRun<'_> {
             t_solved - t_cast,
             encoded.solver.iterations,
             encoded.solver.termination,
+            solves_text(&encoded.solver.solves),
             objective_path(&encoded.solver.objective_history),
             total - t_solved,
             peak_memory_bytes() as f64 / 1e6
@@ -1129,4 +1131,21 @@ impl BenchRun<'_> {
             peak_memory_bytes() as f64 / 1e6
         ))
     }
+}
+
+/// An encode's solves in words: "1.000 × 261 converged, not read; 0.500 × 90 stopped, read; …" (the decoys'
+/// weight scale, iterations, why each stopped and whether the target read its end).
+fn solves_text(solves: &[eyekey_core::encoding::job::SolveStep]) -> String {
+    let steps: Vec<String> = solves
+        .iter()
+        .map(|s| {
+            let read = match s.target_reads {
+                Some(true) => ", read",
+                Some(false) => ", not read",
+                None => "",
+            };
+            format!("{:.3} × {} {}{read}", s.decoy_weight_scale, s.iterations, s.termination)
+        })
+        .collect();
+    steps.join("; ")
 }

@@ -86,6 +86,22 @@ pub struct SolverSummary {
     /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
     /// through one whose kernels are drawn with another seed.
     pub target_reads: bool,
+    /// Every solve of the encode in order: the adaptive rounds', then the target guard's.
+    #[serde(default)]
+    pub solves: Vec<SolveStep>,
+}
+
+/// One solve of an encode ([`SolverSummary::solves`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolveStep {
+    /// The factor the decoys' weights were scaled by.
+    pub decoy_weight_scale: f64,
+    /// Its iterations.
+    pub iterations: u32,
+    /// Why it stopped: `stopped` where the target guard found the target reading its iterate clearly.
+    pub termination: Termination,
+    /// Whether the target read its end, where it was judged (an adaptive round before the last is not).
+    pub target_reads: Option<bool>,
 }
 
 /// Why a job did not produce a bundle.

@@ -160,7 +160,8 @@ pub struct EncodeOptions {
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the last solve's end, until the target reads or the
     /// weights are down to an eighth of where they started and to 0.0375 (`GUARD_FLOOR_WEIGHT`) or below; then
-    /// try the weight √2 above the one that read and keep it if the target still reads. The target's reading comes
+    /// try the weight √2 above the one that read and keep it if the target still reads. Each lighter solve stops
+    /// early where the target already reads its view clearly (`GUARD_EARLY_EVERY`). The target's reading comes
     /// first: a display that cannot hide the document from the decoys then shows it to the target anyway, and
     /// the evaluation says who else reads.
     pub ensure_target_reads: bool,

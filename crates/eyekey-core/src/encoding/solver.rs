@@ -67,16 +67,19 @@ pub enum Termination {
     Cancelled,
     /// The objective became non-finite.
     NumericalFailure,
+    /// A checkpoint stopped the solve ([`Checkpoint`]).
+    Stopped,
 }
 
 impl Termination {
-    /// The name used in JSON: `converged`, `max_iterations`, `cancelled`, `numerical_failure`.
+    /// The name used in JSON: `converged`, `max_iterations`, `cancelled`, `numerical_failure`, `stopped`.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Converged => "converged",
             Self::MaxIterations => "max_iterations",
             Self::Cancelled => "cancelled",
             Self::NumericalFailure => "numerical_failure",
+            Self::Stopped => "stopped",
         }
     }
 }
@@ -300,6 +303,33 @@ pub fn minimise(
     progress: &mut dyn FnMut(Progress),
     cancel: &AtomicBool,
 ) -> SolveResult {
+    minimise_judged(obj, x0, lower, upper, options, progress, cancel, None)
+}
+
+/// After every `every` iterations (and not after the last), `stop` is shown the iteration count and the iterate
+/// x_k; when it answers true the solve ends there ([`Termination::Stopped`]) and returns x_k. Until then the
+/// iterates are those of the solve without it, bit for bit.
+pub struct Checkpoint<'a> {
+    pub every: u32,
+    pub stop: &'a mut dyn FnMut(u32, &[f32]) -> bool,
+}
+
+/// [`minimise`], with a [`Checkpoint`] that may end it early.
+#[allow(clippy::too_many_arguments)]
+pub fn minimise_judged(
+    obj: &dyn Objective,
+    x0: Vec<f32>,
+    lower: f32,
+    upper: f32,
+    options: &SolverOptions,
+    progress: &mut dyn FnMut(Progress),
+    cancel: &AtomicBool,
+    mut checkpoint: Option<Checkpoint<'_>>,
+) -> SolveResult {
+    assert!(
+        checkpoint.as_ref().is_none_or(|c| c.every > 0),
+        "checkpoints every 1 or more iterations"
+    );
     let start = Instant::now();
     let n = obj.dim();
     assert_eq!(x0.len(), n, "warm start length");
@@ -386,6 +416,12 @@ pub fn minimise(
             }
         } else {
             calm = 0;
+        }
+        if let Some(c) = checkpoint.as_mut() {
+            if iterations % c.every == 0 && iterations < options.max_iterations && (c.stop)(iterations, &x) {
+                termination = Termination::Stopped;
+                break;
+            }
         }
     }
     SolveResult {
@@ -604,6 +640,72 @@ mod tests {
         assert_eq!(calls as u32, r.iterations);
         assert_eq!(r.history.len() as u32, r.iterations);
         assert!(r.history.last().unwrap() < &r.history[0]);
+    }
+
+    #[test]
+    fn a_checkpoint_sees_every_nth_iterate_and_stops_the_solve_where_it_says() {
+        let p = problem(60, 30, 9);
+        let options = SolverOptions {
+            max_iterations: 200,
+            tolerance: 1e-12,
+            ..Default::default()
+        };
+        let solve = |max_iterations: u32, checkpoint: Option<Checkpoint<'_>>| {
+            let options = SolverOptions {
+                max_iterations,
+                ..options.clone()
+            };
+            minimise_judged(
+                &p,
+                vec![0.0; 30],
+                0.0,
+                1.0,
+                &options,
+                &mut |_| {},
+                &AtomicBool::new(false),
+                checkpoint,
+            )
+        };
+        // Shown the iterates at 7, 14, …: each is the iterate of a solve capped there, bit for bit; told to stop
+        // at 42, it ends there with that iterate.
+        let mut seen = Vec::new();
+        let mut stop = |k: u32, x: &[f32]| {
+            seen.push((k, x.to_vec()));
+            k == 42
+        };
+        let stopped = solve(
+            200,
+            Some(Checkpoint {
+                every: 7,
+                stop: &mut stop,
+            }),
+        );
+        assert_eq!(stopped.termination, Termination::Stopped);
+        assert_eq!(stopped.iterations, 42);
+        assert_eq!(seen.iter().map(|s| s.0).collect::<Vec<_>>(), [7, 14, 21, 28, 35, 42]);
+        for (k, x) in &seen {
+            assert_eq!(*x, solve(*k, None).x, "the iterate at {k}");
+        }
+        let capped = solve(42, None);
+        assert_eq!(capped.termination, Termination::MaxIterations);
+        assert_eq!(stopped.x, capped.x);
+        assert_eq!(stopped.history, capped.history);
+        // A checkpoint that never says stop changes nothing, and is not asked after the last iteration.
+        let mut asked = 0;
+        let mut never = |_: u32, _: &[f32]| {
+            asked += 1;
+            false
+        };
+        let judged = solve(
+            35,
+            Some(Checkpoint {
+                every: 7,
+                stop: &mut never,
+            }),
+        );
+        assert_eq!(asked, 4, "at 7, 14, 21 and 28; not at the cap, 35");
+        let capped = solve(35, None);
+        assert_eq!((judged.x, judged.termination), (capped.x, capped.termination));
     }
 
     #[test]
