@@ -637,14 +637,19 @@ fn expand_tied(d: &DisplayGeometry, x: &[f32], tied: bool) -> Vec<f32> {
     }
 }
 
-/// One solve of the encoder's objective (Eq. 14, with Eq. 16's terms for difference maximisation) from `x`.
+/// Judges a light field: whether the target reads it (clearly enough to stop a solve early).
+type Judge<'a> = &'a dyn Fn(&[f32]) -> bool;
+
+/// One solve of the encoder's objective (Eq. 14, with Eq. 16's terms for difference maximisation) from `x`,
+/// stopped early at a checkpoint where `stop_when` judges the light field so far (`GUARD_EARLY_EVERY`).
+#[allow(clippy::too_many_arguments)]
 fn solve_round(
     spec: &JobSpec,
     cast: &Cast,
     x: Vec<f32>,
     tied: bool,
     decoy_scale: f64,
-    stop_when: Option<&dyn Fn(&[f32]) -> bool>,
+    stop_when: Option<Judge<'_>>,
     mut report: impl FnMut(Progress),
     cancel: &AtomicBool,
 ) -> Result<SolveResult, PipelineError> {
@@ -1158,8 +1163,8 @@ mod tests {
     #[test]
     fn a_lighter_solve_stops_where_the_target_reads_it_clearly() {
         // The decoy with the target's own eyes at twice its weight, up to 300 iterations: the first solve hides
-        // the PIN from the target, and each of the guard's lighter solves starts from the heavier one's end. (At
-        // this commit: 1 and 1/2 run all 300 iterations and do not read; 1/4 and √2/4 stop at 90, read.)
+        // the PIN from the target, and each of the guard's lighter solves starts from the heavier one's end. (In
+        // this job: 1 and 1/2 run all 300 iterations and do not read; 1/4 and √2/4 stop at 90, read.)
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
         let mut spec = pin_job(pin_hint());
