@@ -39,6 +39,9 @@ pub struct Application {
     shutdown: ShutdownHandle,
     operator_token_file: Option<PathBuf>,
     tls: Option<tokio_rustls::TlsAcceptor>,
+    /// SIGINT and SIGTERM, listened for since the process was built: one sent as soon as it says it is serving
+    /// stops it gracefully instead of killing it.
+    stop: StopSignal,
     /// Held while this process uses the data directory.
     _lock: std::fs::File,
 }
@@ -100,6 +103,7 @@ impl Application {
             shutdown: opened.shutdown,
             operator_token_file: opened.operator_token_file,
             tls,
+            stop: Box::pin(stop_signal()),
             _lock: opened.lock,
         })
     }
@@ -151,6 +155,7 @@ impl Application {
             state,
             shutdown,
             tls,
+            stop,
             _lock: lock,
             ..
         } = self;
@@ -165,7 +170,7 @@ impl Application {
 
         let signal_shutdown = shutdown.clone();
         tokio::spawn(async move {
-            stop_signal().await;
+            stop.await;
             tracing::info!("shutdown signal received");
             signal_shutdown.shutdown();
         });
@@ -335,6 +340,8 @@ async fn wait_for_schema(location: &store::Location) -> (sqlx::AnyPool, store::W
 pub struct WorkerProcess {
     state: AppState,
     shutdown: ShutdownHandle,
+    /// As [`Application`]'s.
+    stop: StopSignal,
     _lock: std::fs::File,
 }
 
@@ -351,6 +358,7 @@ impl WorkerProcess {
         Ok(Self {
             state: opened.state,
             shutdown: opened.shutdown,
+            stop: Box::pin(stop_signal()),
             _lock: opened.lock,
         })
     }
@@ -368,13 +376,18 @@ impl WorkerProcess {
     /// Runs the workers until SIGINT, SIGTERM or [`ShutdownHandle::shutdown`]; on shutdown running jobs are
     /// re-queued without counting the attempt, as in `serve`.
     pub async fn run_until_stopped(self) -> anyhow::Result<()> {
-        let Self { state, shutdown, _lock } = self;
+        let Self {
+            state,
+            shutdown,
+            stop,
+            _lock,
+        } = self;
         tracing::info!(workers = state.config.workers, instance = %state.instance_id, "eyekey worker running");
         let feed = spawn_feed(&state);
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
         let signal_shutdown = shutdown.clone();
         tokio::spawn(async move {
-            stop_signal().await;
+            stop.await;
             tracing::info!("shutdown signal received");
             signal_shutdown.shutdown();
         });
@@ -468,28 +481,42 @@ async fn reject_oversize(
     }
 }
 
-/// Completes on Ctrl-C, or SIGTERM on Unix (what `docker stop` sends). The service and the display client
-/// both stop on it.
-pub async fn stop_signal() {
-    let ctrl_c = async {
+/// [`stop_signal`], held until it is awaited.
+type StopSignal = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
+
+/// Completes on Ctrl-C (SIGINT), or SIGTERM on Unix (what `docker stop` sends). The service and the display
+/// client both stop on it. The signals are listened for from this call on (call it within the runtime), not
+/// from the first poll: a signal that arrives in between is kept instead of taking its default action, which
+/// kills the process.
+pub fn stop_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
+    #[cfg(unix)]
+    let (interrupt, terminate) = {
+        use tokio::signal::unix::{signal, SignalKind};
+        (
+            signal(SignalKind::interrupt()).ok(),
+            signal(SignalKind::terminate()).ok(),
+        )
+    };
+    async move {
+        #[cfg(unix)]
+        {
+            let wait = |s: Option<tokio::signal::unix::Signal>| async move {
+                match s {
+                    Some(mut s) => {
+                        s.recv().await;
+                    }
+                    None => std::future::pending::<()>().await,
+                }
+            };
+            tokio::select! {
+                _ = wait(interrupt) => {}
+                _ = wait(terminate) => {}
+            }
+        }
+        #[cfg(not(unix))]
         if tokio::signal::ctrl_c().await.is_err() {
             std::future::pending::<()>().await;
         }
-    };
-    #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
-            }
-            Err(_) => std::future::pending::<()>().await,
-        }
-    };
-    #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        _ = ctrl_c => {}
-        _ = term => {}
     }
 }
 

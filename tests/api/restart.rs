@@ -91,3 +91,38 @@ async fn a_job_abandoned_by_a_crashed_worker_is_finished_by_another_after_its_le
     assert_eq!(job["state"], "succeeded", "{job}");
     assert_eq!(job["attempts"], 2, "the crashed attempt counts");
 }
+
+/// A SIGTERM sent the moment `eyekey serve` says it is serving stops it gracefully (exit 0), not by the signal's
+/// default action, which kills the process: the signals are listened for before it says so.
+#[test]
+fn a_sigterm_as_soon_as_the_server_says_it_serves_stops_it_gracefully() {
+    use std::io::BufRead as _;
+    for _ in 0..3 {
+        let dir = tempfile::tempdir().unwrap();
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_eyekey"))
+            .args(["serve", "--bind", "127.0.0.1:0", "--workers", "0", "--data-dir"])
+            .arg(dir.path())
+            .env("RUST_LOG", "info")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+        let mut log = Vec::new();
+        for line in lines.by_ref() {
+            let line = line.unwrap();
+            let serving = line.contains("eyekey serving on ");
+            log.push(line);
+            if serving {
+                // SAFETY: kill(2) on our own child's pid.
+                assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+                break;
+            }
+        }
+        // Read on to the end, so the server's last lines are not written into a closed pipe.
+        log.extend(lines.map_while(Result::ok));
+        let status = child.wait().unwrap();
+        assert!(status.success(), "exited with {status}:\n{}", log.join("\n"));
+        assert!(log.iter().any(|l| l.contains("eyekey stopped")), "{}", log.join("\n"));
+    }
+}
