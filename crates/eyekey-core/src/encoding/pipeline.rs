@@ -264,9 +264,9 @@ pub const GUARD_SUB_RAYS: u32 = 4;
 /// Each of the target guard's lighter solves starts from the heavier one's end, where the target does not read;
 /// every this many iterations the target's view is judged, and the solve stops where the target reads it
 /// clearly (`GUARD_EARLY_MARGIN`). The solve's later iterations then only trade the decoys' suppression, which
-/// the heavier solve left stronger, for the target's fidelity, which it already has: on twelve held-out
-/// `secure` targets the guard keeps the same weights for every one, 30 of 3,000 people at the seat read
-/// against 31, and the encodes take 0.73× the time (docs/experiments.md §2e).
+/// the heavier solve left stronger, for the target's fidelity, which it already has: over 82 held-out `secure`
+/// targets the guard keeps the same weight for 79, every target reads, 128 of 17,000 people at the seat read
+/// against 144, and the benchmark's solve takes about 0.8× the time (docs/experiments.md §2e, BENCHMARKS.md).
 pub const GUARD_EARLY_EVERY: u32 = 90;
 /// The known-font margin the target must read a lighter solve's iterate with, through both of the guard's looks,
 /// to stop it early (or `target_margin`, if larger). With every lighter solve cut at 90 iterations, read or not,
