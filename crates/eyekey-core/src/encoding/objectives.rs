@@ -225,12 +225,10 @@ impl MultiplexObjective<'_> {
             })
             .collect();
         if source.is_some() {
-            let st = self.terms[0].observer.transports[0]
-                .stencil()
-                .expect("a gathered light field is read by stencils");
             let planes: Vec<&[f32]> = scratch.iter().map(|s| s.share.as_slice()).collect();
-            let n_bands = self.terms[0].observer.coupling.len();
-            st.combine_planes(x, self.tikhonov as f32, self.scale as f32, &planes, n_bands, out);
+            self.terms[0]
+                .observer
+                .combine_planes(x, self.tikhonov as f32, self.scale as f32, &planes, out);
         } else {
             self.combine(x, &scratch, out);
         }

@@ -179,6 +179,16 @@ impl Observer {
         st.gather(l, self.coupling.len(), bands, pad)
     }
 
+    /// `out` = 2μ·x + Σ_k c·(observer k's [`Self::adjoint_planes`]), written into the light field once, the
+    /// observers' planes added in the order given ([`StencilOperator::combine_planes`]; every observer on this
+    /// display held as per-view kernels).
+    ///
+    /// [`StencilOperator::combine_planes`]: crate::physics::transport::StencilOperator::combine_planes
+    pub fn combine_planes(&self, x: &[f32], mu: f32, c: f32, planes: &[&[f32]], out: &mut [f32]) {
+        let st = self.transports[0].stencil().expect("an operator held as stencils");
+        st.combine_planes(x, mu, c, planes, self.coupling.len(), out);
+    }
+
     /// [`Self::forward_lms`] of `l` with `l` also gathered (`source`): the same image bit for bit
     /// ([`Self::gather_pad`] must be `Some`).
     pub fn forward_gathered(&self, source: &GatheredField, l: &[f32], out: &mut [f32]) {

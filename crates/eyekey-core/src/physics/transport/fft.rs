@@ -35,7 +35,7 @@ use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
-use super::stencil::{scatter_views, ViewStencil};
+use super::stencil::ViewStencil;
 
 /// Transforms of one padded grid size.
 pub(crate) struct FftPlan {
@@ -348,25 +348,7 @@ impl FftKernels {
         });
     }
 
-    /// The adjoint of [`Self::forward_band`]: out[p·N + band] = Σ_a c[a]·(Tᵀ y_a)_p.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn adjoint_band(
-        &self,
-        views: &[ViewStencil],
-        term: Option<usize>,
-        y: &[f32],
-        n_bands: usize,
-        band: usize,
-        c: [f32; 3],
-        out: &mut [f32],
-    ) {
-        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
-        let mut planes = vec![0f32; nu * nv * ny * nx];
-        self.adjoint_planes(views, term, y, c, nx, &mut planes);
-        scatter_views(out, &planes, nx, (nx, ny), (nu, nv), n_bands, band);
-    }
-
-    /// [`Self::adjoint_band`] before it is written into the light field: sample (x, y; view v) at
+    /// The adjoint of [`Self::forward_band`], Σ_a c[a]·(Tᵀ y_a), per view: sample (x, y; view v) at
     /// `planes[(v·ny + y)·stride + x]` (overwritten; the rest of each row left as it is).
     pub(crate) fn adjoint_planes(
         &self,

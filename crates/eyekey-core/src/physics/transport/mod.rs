@@ -276,7 +276,7 @@ impl TransportMatrix {
 
     /// True when T is held as per-view stencils.
     pub fn is_stencil(&self) -> bool {
-        matches!(self.repr, Repr::Stencil(_))
+        self.stencil().is_some()
     }
 
     /// The per-view operator, when T is held so.
@@ -289,10 +289,7 @@ impl TransportMatrix {
 
     /// How a per-view (stencil-held) operator computes its products; `None` for a traced CSR operator.
     pub fn product_method(&self) -> Option<ProductMethod> {
-        match &self.repr {
-            Repr::Sparse(_) => None,
-            Repr::Stencil(st) => Some(st.method()),
-        }
+        self.stencil().map(StencilOperator::method)
     }
 
     /// The same operator with a per-view operator's products computed by `method` (a CSR operator is

@@ -811,19 +811,14 @@ impl StencilOperator {
         c: [f32; 3],
         out: &mut [f32],
     ) {
-        assert_eq!(y.len(), self.n_pixels() * 3, "retinal image length");
         assert_eq!(out.len(), self.n_samples() * n_bands, "light field length");
-        if let Some(f) = self.fft.0.as_ref().filter(|f| f.takes(term)) {
-            return f.adjoint_band(&self.views, term, y, n_bands, band, c, out);
-        }
         let mut planes = vec![0f32; self.plane_len()];
-        self.adjoint_planes_by_stencils(term, y, c, &mut planes);
-        let (nx, ny) = (self.holes_x, self.holes_y);
+        self.adjoint_planes(term, y, c, &mut planes);
         scatter_views(
             out,
             &planes,
-            self.layout.nx_blocks,
-            (nx, ny),
+            self.plane_stride(),
+            (self.holes_x, self.holes_y),
             (self.views_u, self.views_v),
             n_bands,
             band,
@@ -949,7 +944,7 @@ impl GatheredField {
 
 /// Writes band `band` of the light field `out` from per-view planes: sample (x, y; view j·U + i) takes
 /// `planes[((j·U + i)·ny + y)·stride + x]`; the other bands' entries are left as they are.
-pub(crate) fn scatter_views(
+fn scatter_views(
     out: &mut [f32],
     planes: &[f32],
     stride: usize,
