@@ -1133,7 +1133,7 @@ impl BenchRun<'_> {
     }
 }
 
-/// An encode's solves in words: "1.000 × 261 converged, not read; 0.500 × 90 stopped, read; …" (the decoys'
+/// An encode's solves in words: "1.000 × 261 converged, not read; 0.500 × 60 stopped, read; …" (the decoys'
 /// weight scale, iterations, why each stopped and whether the target read its end).
 fn solves_text(solves: &[eyekey_core::encoding::job::SolveStep]) -> String {
     let steps: Vec<String> = solves

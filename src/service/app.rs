@@ -168,12 +168,7 @@ impl Application {
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
         let retention = super::retention::spawn_retention(&state);
 
-        let signal_shutdown = shutdown.clone();
-        tokio::spawn(async move {
-            stop.await;
-            tracing::info!("shutdown signal received");
-            signal_shutdown.shutdown();
-        });
+        shut_down_on(stop, &shutdown);
         super::listener::serve(
             listener,
             router,
@@ -385,12 +380,7 @@ impl WorkerProcess {
         tracing::info!(workers = state.config.workers, instance = %state.instance_id, "eyekey worker running");
         let feed = spawn_feed(&state);
         let mut workers = jobs::spawn_workers(&state, state.config.workers);
-        let signal_shutdown = shutdown.clone();
-        tokio::spawn(async move {
-            stop.await;
-            tracing::info!("shutdown signal received");
-            signal_shutdown.shutdown();
-        });
+        shut_down_on(stop, &shutdown);
         let mut stopped = state.shutdown.clone();
         crate::service::state::stopped(&mut stopped).await;
         drain_workers(&state, &mut workers).await;
@@ -484,10 +474,20 @@ async fn reject_oversize(
 /// [`stop_signal`], held until it is awaited.
 type StopSignal = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
 
+/// Shuts the process down (`shutdown`) when `stop` completes.
+fn shut_down_on(stop: StopSignal, shutdown: &ShutdownHandle) {
+    let shutdown = shutdown.clone();
+    tokio::spawn(async move {
+        stop.await;
+        tracing::info!("shutdown signal received");
+        shutdown.shutdown();
+    });
+}
+
 /// Completes on Ctrl-C (SIGINT), or SIGTERM on Unix (what `docker stop` sends). The service and the display
-/// client both stop on it. The signals are listened for from this call on (call it within the runtime), not
-/// from the first poll: a signal that arrives in between is kept instead of taking its default action, which
-/// kills the process.
+/// client both stop on it. On Unix the signals are listened for from this call on (call it within the runtime),
+/// not from the first poll: a signal that arrives in between is kept instead of taking its default action,
+/// which kills the process.
 pub fn stop_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
     #[cfg(unix)]
     let (interrupt, terminate) = {

@@ -95,6 +95,9 @@ pub fn encode(
     // checkpoint, it stops there (`GUARD_EARLY_EVERY`, `GUARD_EARLY_MARGIN`).
     let early_margin = o.target_margin.max(GUARD_EARLY_MARGIN);
     let clearly = |l: &[f32]| cast.target_reads(&reference, l, early_margin);
+    // Whether the target reads a lighter solve's end: stopped, it read clearly at the checkpoint.
+    let reads_end =
+        |how: Termination, l: &[f32]| how == Termination::Stopped || cast.target_reads(&reference, l, o.target_margin);
     // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
     let has_decoys = !cast.others.is_empty();
     let mut scale = 1.0;
@@ -115,8 +118,7 @@ pub fn encode(
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
         summary.decoy_weight_scale = scale;
-        // Stopped: read clearly at the checkpoint, so read.
-        let reads = result.termination == Termination::Stopped || cast.target_reads(&reference, &l, o.target_margin);
+        let reads = reads_end(result.termination, &l);
         summary.target_reads = reads;
         judged(&mut summary, reads);
     }
@@ -127,8 +129,7 @@ pub fn encode(
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
         let result = solve_round(spec, &cast, x, tied, between, Some(&clearly), report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
-        let reads =
-            result.termination == Termination::Stopped || cast.target_reads(&reference, &l_between, o.target_margin);
+        let reads = reads_end(result.termination, &l_between);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
         absorb(&mut summary, &result, between);
         judged(&mut summary, reads);
@@ -705,10 +706,10 @@ fn solve_round(
         ..Default::default()
     };
     let l_max = d.l_max as f32;
-    let mut stop = |_: u32, x: &[f32]| stop_when.is_some_and(|judge| judge(&expand_tied(d, x, tied)));
-    let checkpoint = stop_when.is_some().then_some(Checkpoint {
+    let mut stop = stop_when.map(|judge| move |_: u32, x: &[f32]| judge(&expand_tied(d, x, tied)));
+    let checkpoint = stop.as_mut().map(|stop| Checkpoint {
         every: GUARD_EARLY_EVERY,
-        stop: &mut stop,
+        stop,
     });
     let result = if tied {
         let tied_objective = TiedViews::new(objective, d);
@@ -1167,7 +1168,8 @@ mod tests {
     fn a_lighter_solve_stops_where_the_target_reads_it_clearly() {
         // The decoy with the target's own eyes at twice its weight, up to 300 iterations: the first solve hides
         // the PIN from the target, and each of the guard's lighter solves starts from the heavier one's end. (In
-        // this job: 1 and 1/2 run all 300 iterations and do not read; 1/4 and √2/4 stop at the first checkpoint, read.)
+        // this job: 1 and 1/2 run all 300 iterations and do not read; 1/4 and √2/4 stop at the first checkpoint
+        // and read.)
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
         let mut spec = pin_job(pin_hint());
