@@ -50,6 +50,11 @@ struct Encoding {
     seed: u64,
     /// The encoder's target guard (`ensure_target_reads`), as a job has it.
     guard: bool,
+    /// The slip's text hint given to the encoder (`document_text`) without the guard: the leak penalty then also
+    /// covers each secret character's glyphs, and bystander rounds judge by the known-font attacker.
+    text_hint: bool,
+    /// Bystander camera rounds (`bystander_rounds`, over the default scan).
+    bystander_rounds: u32,
 }
 
 /// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
@@ -70,6 +75,8 @@ const BASELINE: Encoding = Encoding {
     head_weight: eyekey_core::encoding::options::DEFAULT_HEAD_WEIGHT,
     seed: 5,
     guard: false,
+    text_hint: false,
+    bystander_rounds: 0,
 };
 
 /// Camera decoys at 0 and +2 D behind a 4 mm aperture, at the seat and on a 0.8 mm ring around it: the settings
@@ -157,8 +164,11 @@ impl Baseline {
                 camera_decoy_extra_apertures_mm: e.camera_extra_apertures_mm.to_vec(),
                 camera_decoy_ring_mm: e.camera_ring_mm,
                 ensure_target_reads: e.guard,
-                // The guard judges the target as the job would, with the slip's text hint.
-                document_text: e.guard.then(|| self.text.clone()),
+                bystander_rounds: e.bystander_rounds,
+                // The guard judges the target as the job would, with the slip's text hint; bystander rounds judge
+                // by it too, but leave the leak penalty as the row has it unless the hint is asked for.
+                document_text: (e.guard || e.text_hint || e.bystander_rounds > 0).then(|| self.text.clone()),
+                leak_glyphs: e.guard || e.text_hint,
                 ..Self::options(max_iterations)
             },
         )
@@ -177,6 +187,16 @@ impl Baseline {
             options,
         };
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
+        for (k, r) in enc.solver.bystander_rounds.iter().enumerate() {
+            eprintln!(
+                "{label}: bystander round {}: {} of {} camera settings read, best known-font margin {:?}, {} added as decoys",
+                k + 1,
+                r.read,
+                r.settings,
+                r.best_margin,
+                r.added
+            );
+        }
         Ok((enc.light_field, t.elapsed().as_secs_f64()))
     }
 
@@ -612,6 +632,16 @@ pub struct Overrides {
     /// Every encoding with this encoder seed instead of 5 (the people and cameras who look are the same).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Every encoding given the slip's text hint (its leak penalty then covers the secret glyphs too).
+    #[arg(long)]
+    pub text_hint: bool,
+    /// Every encoding with this many bystander camera rounds (`bystander_rounds`): they judge by the slip's
+    /// known-font attacker, and the leak penalty stays as the row has it (glyphs only with `--text-hint`).
+    #[arg(long)]
+    pub bystander_rounds: Option<u32>,
+    /// Every encoding with the target guard (`ensure_target_reads`) and the text hint, as a job runs.
+    #[arg(long)]
+    pub guard: bool,
 }
 
 impl Overrides {
@@ -629,6 +659,18 @@ impl Overrides {
         if let Some(seed) = self.seed {
             e.seed = seed;
             label += &format!(", encoder seed {seed}");
+        }
+        if self.guard && !e.guard {
+            e.guard = true;
+            label += ", with the target guard";
+        }
+        if self.text_hint && !e.guard {
+            e.text_hint = true;
+            label += ", with the text hint";
+        }
+        if let Some(n) = self.bystander_rounds {
+            e.bystander_rounds = n;
+            label += &format!(", {n} bystander camera round(s)");
         }
         (e, label)
     }

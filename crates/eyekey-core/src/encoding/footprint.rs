@@ -63,13 +63,23 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
     } else {
         0
     };
-    let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round);
+    let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round)
+        + u64::from(options.bystander_rounds) * u64::from(options.bystander_decoys_per_round);
     target
         + u64::from(options.population_decoys)
         + u64::from(options.near_pupil_decoys) * if options.near_pupil_ring_mm > 0.0 { 2 } else { 1 }
         + cameras
         + adaptive
         + extra_observers as u64
+}
+
+/// Camera settings the bystander rounds look through: every round, each scan offset in four directions, the threat
+/// model's 27 lenses behind the sensor's R, G and B and each band's filter (189 a position with 4 bands).
+pub fn bystander_scan_settings(display: &DisplayGeometry, options: &EncodeOptions) -> u64 {
+    let sweep = crate::evaluation::BystanderOptions::default();
+    let lenses = (sweep.camera_focus_d.len() * sweep.camera_apertures_mm.len()) as u64;
+    let channels = 3 + display.n_bands() as u64;
+    u64::from(options.bystander_rounds) * 4 * options.bystander_scan_mm.len() as u64 * lenses * channels
 }
 
 /// The estimated cost of a job on `display` with `options` and `extra_observers` representative observers
@@ -79,7 +89,10 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
     let observers = encoder_observers(display, options, extra_observers);
     let per_unknown = SOLVER_BYTES_PER_UNKNOWN + OBSERVER_BYTES_PER_UNKNOWN * observers;
     let peak_bytes = BASE_BYTES.saturating_add(unknowns.saturating_mul(per_unknown));
-    let evaluated = u64::from(options.evaluation_population) + extra_observers as u64 + EVALUATION_CAMERA_SETTINGS;
+    let evaluated = u64::from(options.evaluation_population)
+        + extra_observers as u64
+        + EVALUATION_CAMERA_SETTINGS
+        + bystander_scan_settings(display, options);
     let d = unknowns as f64;
     let seconds = d * observers as f64 * (BUILD_SECONDS + ITERATION_SECONDS * f64::from(options.max_iterations))
         + d * evaluated as f64 * EVALUATION_SECONDS;
@@ -137,6 +150,16 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(footprint(&d, &o, 0).observers, 13 + 6);
+        // A bystander round: up to 8 camera decoys, and 15 offsets × 4 directions × 27 lenses × 7 channels looked
+        // through.
+        let o = EncodeOptions {
+            bystander_rounds: 1,
+            ..Default::default()
+        };
+        let f = footprint(&d, &o, 0);
+        assert_eq!(f.observers, 13 + 8);
+        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 11_340.0) * 2e-7;
+        assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
     }
 
     #[test]

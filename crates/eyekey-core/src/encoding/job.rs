@@ -77,6 +77,9 @@ pub struct SolverSummary {
     pub observers: usize,
     /// Decoys added by each adaptive round.
     pub adaptive_decoys_added: Vec<usize>,
+    /// What each bystander camera round (`bystander_rounds`) saw and added.
+    #[serde(default)]
+    pub bystander_rounds: Vec<BystanderRound>,
     /// Unknowns of the light field.
     pub unknowns: usize,
     /// The factor the decoys' weights (noise and leak) were finally scaled by: 1 unless the target did not read
@@ -89,6 +92,21 @@ pub struct SolverSummary {
     /// Every solve of the encode in order: the adaptive rounds', then the target guard's.
     #[serde(default)]
     pub solves: Vec<SolveStep>,
+}
+
+/// One bystander camera round ([`SolverSummary::bystander_rounds`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct BystanderRound {
+    /// Camera settings (position, lens and channel) looked through.
+    pub settings: usize,
+    /// Of those, the settings the judge read (as seen or unwarped).
+    pub read: usize,
+    /// The known-font attacker's best margin over every setting (negative: every setting misreads a character);
+    /// absent without a text hint.
+    pub best_margin: Option<f64>,
+    /// Settings added as decoys.
+    pub added: usize,
 }
 
 /// One solve of an encode ([`SolverSummary::solves`]).

@@ -94,6 +94,10 @@ pub struct EncodeOptions {
     /// `decoy_weight` 0 the decoys are asked only not to see the document, not to see noise.
     #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 100.0))]
     pub leak_weight: f64,
+    /// With `document_text`, the leak penalty also covers each secret character's glyph discriminants (false: the
+    /// ink-box patterns alone, as without a text hint, while the guard and the bystander rounds still judge by the
+    /// known-font attacker).
+    pub leak_glyphs: bool,
     /// Seed for population sampling, jitter and noise decoys.
     pub seed: u64,
     /// Sub-rays traced per light-field sample (S).
@@ -157,6 +161,19 @@ pub struct EncodeOptions {
     /// what it sees, reads those frames (docs/experiments.md §2c).
     #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 20.0))]
     pub camera_decoy_ring_mm: f64,
+    /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
+    /// focus and aperture of [`BystanderOptions::default`](crate::evaluation::BystanderOptions), behind the
+    /// sensor's R, G and B and behind each band's filter) looks from `bystander_scan_mm` to the right, left,
+    /// above and below the target, with the encoder's own kernel draw; up to `bystander_decoys_per_round` of the
+    /// settings nearest to reading (as seen or unwarped: the known-font attacker's margin where the text is known,
+    /// within [`BYSTANDER_NEAR_MARGIN`] of reading; else legibility at least 0.8 of the threshold) join as decoys,
+    /// shown noise and held to the leak penalty, and the solve runs again from its end. A camera just past one of
+    /// the display's repeats of the seat reads frames that hold the cameras at the seat (docs/experiments.md §2c).
+    pub bystander_rounds: u32,
+    /// Lateral offsets (mm) the bystander camera rounds look from, each in four directions.
+    pub bystander_scan_mm: Vec<f64>,
+    /// Camera settings added as decoys per bystander round at most.
+    pub bystander_decoys_per_round: u32,
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the last solve's end, until the target reads or the
     /// weights are down to an eighth of where they started and to 0.0375 (`GUARD_FLOOR_WEIGHT`) or below; then
@@ -191,6 +208,7 @@ impl Default for EncodeOptions {
             decoy: DecoyKind::Noise,
             decoy_weight: None,
             leak_weight: 3.0,
+            leak_glyphs: true,
             seed: 1,
             sub_rays: 16,
             max_iterations: 300,
@@ -209,6 +227,9 @@ impl Default for EncodeOptions {
             camera_decoy_aperture_mm: 6.0,
             camera_decoy_extra_apertures_mm: vec![],
             camera_decoy_ring_mm: 0.0,
+            bystander_rounds: 0,
+            bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
+            bystander_decoys_per_round: 8,
             ensure_target_reads: true,
             target_margin: 0.0,
             document_text: None,
@@ -224,6 +245,18 @@ pub const SECURE_DECOY_WEIGHT: f64 = 0.5;
 /// The decoys' weight on every other display when none is asked for. Over every preset's held-out targets 0.5
 /// let more people read than 0.3 (22 of 540 against 15; docs/experiments.md §2e).
 pub const DEFAULT_DECOY_WEIGHT: f64 = 0.3;
+
+/// Where the bystander camera rounds look from by default (mm, each to the right, left, above and below): 10.8 to
+/// 22 mm in steps of 0.8 mm, halfway between the points of the bystander experiment's fine scan (10, 11.2, 12, …
+/// 20.8 mm), so that the experiment judges the frames from positions the encoder never looked from.
+pub const DEFAULT_BYSTANDER_SCAN_MM: [f64; 15] = [
+    10.8, 11.6, 12.4, 13.2, 14.0, 14.8, 15.6, 16.4, 17.2, 18.0, 18.8, 19.6, 20.4, 21.2, 22.0,
+];
+
+/// How near to reading a bystander camera setting must come to join as a decoy (`bystander_rounds`): the known-font
+/// attacker's margin (the true glyph's smallest lead over the best other, negative when a character is misread)
+/// at least minus this.
+pub const BYSTANDER_NEAR_MARGIN: f64 = 0.02;
 
 /// Each head-movement position's weight by default: a quarter of the design position's.
 pub const DEFAULT_HEAD_WEIGHT: f64 = 0.25;
@@ -331,6 +364,23 @@ impl EncodeOptions {
                 "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
             );
         }
+        if self.bystander_rounds > 3 || self.bystander_decoys_per_round > 32 {
+            return bad(
+                "bystander_rounds",
+                "at most 3 rounds adding at most 32 decoys each".to_string(),
+            );
+        }
+        if self.bystander_scan_mm.len() > 32
+            || self
+                .bystander_scan_mm
+                .iter()
+                .any(|r| !(r.is_finite() && (0.5..=500.0).contains(r)))
+        {
+            return bad(
+                "bystander_scan_mm",
+                "at most 32 offsets, each within 0.5..=500 mm".to_string(),
+            );
+        }
         if self.camera_decoy_focus_d.len() > 9
             || self
                 .camera_decoy_focus_d
@@ -422,6 +472,35 @@ mod tests {
             assert!(e.contains("decoy_weight"), "{e}");
         }
         assert!(EncodeOptions::default().validate().is_ok());
+    }
+
+    #[test]
+    fn bystander_rounds_are_bounded_and_their_scan_sits_between_the_fine_scan_points() {
+        let refused = |o: EncodeOptions, field: &str| {
+            let e = o.validate().unwrap_err().to_string();
+            assert!(e.contains(field), "{e}");
+        };
+        let with = |f: fn(&mut EncodeOptions)| {
+            let mut o = EncodeOptions {
+                bystander_rounds: 1,
+                ..Default::default()
+            };
+            f(&mut o);
+            o
+        };
+        assert!(with(|_| {}).validate().is_ok());
+        refused(with(|o| o.bystander_rounds = 4), "bystander_rounds");
+        refused(with(|o| o.bystander_decoys_per_round = 33), "bystander_rounds");
+        refused(with(|o| o.bystander_scan_mm = vec![0.2]), "bystander_scan_mm");
+        refused(with(|o| o.bystander_scan_mm = vec![f64::NAN]), "bystander_scan_mm");
+        refused(with(|o| o.bystander_scan_mm = vec![12.0; 33]), "bystander_scan_mm");
+        // 0.4 mm from every point of the bystander experiment's fine scan (10, 11.2, 12, … 20.8 mm).
+        let fine = [10.0, 11.2, 12.0, 12.8, 13.6, 14.4, 17.6, 18.4, 19.2, 20.0, 20.8, 25.6];
+        for r in DEFAULT_BYSTANDER_SCAN_MM {
+            let nearest = fine.iter().map(|f| (f - r).abs()).fold(f64::INFINITY, f64::min);
+            assert!(nearest > 0.39, "{r}");
+        }
+        assert_eq!(EncodeOptions::default().bystander_rounds, 0, "off by default");
     }
 
     #[test]

@@ -12,13 +12,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use super::leak::LeakPatterns;
 use super::objectives::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term, TiedViews};
 use super::solver::{minimise_judged, Checkpoint, Objective, Progress, SolveResult, SolverOptions, Termination};
-use crate::evaluation::attackers::{camera_lens, one_band_observers, ring};
+use crate::evaluation::attackers::{camera_channels, camera_lens, camera_rgb, head_ring, one_band_observers, ring};
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
+use crate::physics::spectral::coupling;
 use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportError, TransportOptions};
+use rayon::prelude::*;
 
 /// The light field and what the solver did.
 pub struct Encoded {
@@ -45,7 +47,7 @@ pub fn encode(
     let rounds = if o.method == Method::Diffmax {
         0
     } else {
-        o.adaptive_rounds
+        o.adaptive_rounds.max(o.bystander_rounds)
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
     let g = cast.target.grid();
@@ -66,6 +68,7 @@ pub fn encode(
         seconds: 0.0,
         observers: 0,
         adaptive_decoys_added: Vec::new(),
+        bystander_rounds: Vec::new(),
         unknowns: 0,
         decoy_weight_scale: 1.0,
         target_reads: false,
@@ -81,8 +84,17 @@ pub fn encode(
             break;
         }
         let l_now = expand_tied(&spec.display, &x, tied);
-        let added = cast.add_adaptive_decoys(spec, cache, &reference, &l_now, round, cancel)?;
-        summary.adaptive_decoys_added.push(added);
+        let mut added = 0;
+        if round < o.adaptive_rounds {
+            let people = cast.add_adaptive_decoys(spec, cache, &reference, &l_now, round, cancel)?;
+            summary.adaptive_decoys_added.push(people);
+            added += people;
+        }
+        if round < o.bystander_rounds {
+            let cameras = cast.add_bystander_decoys(spec, cache, &reference, &l_now, cancel)?;
+            added += cameras.added;
+            summary.bystander_rounds.push(cameras);
+        }
         if added == 0 {
             break;
         }
@@ -343,8 +355,10 @@ impl Cast {
             .map(|t| crate::evaluation::KnownFontAttacker::new(t, w, h, g.width, g.height))
             .transpose()
             .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
-        let leak =
-            (o.leak_weight > 0.0).then(|| LeakPatterns::new(&spec.document, g.width, g.height, attacker.as_ref()));
+        let leak = (o.leak_weight > 0.0).then(|| {
+            let glyphs = attacker.as_ref().filter(|_| o.leak_glyphs);
+            LeakPatterns::new(&spec.document, g.width, g.height, glyphs)
+        });
         let mut cast = Self {
             leak,
             attacker,
@@ -471,6 +485,108 @@ impl Cast {
             added += 1;
         }
         Ok(added)
+    }
+}
+
+impl Cast {
+    /// Bystander camera decoys (`bystander_rounds`): the threat model's focus-sweeping camera looks at `l_now` from
+    /// `bystander_scan_mm` in four directions, through the encoder's own kernel draw; the settings nearest to
+    /// reading (as seen or unwarped, the evaluation's two readings) join as decoys, most nearly read first.
+    /// Returns what the round saw and added.
+    fn add_bystander_decoys(
+        &mut self,
+        spec: &JobSpec,
+        cache: &TransportCache,
+        reference: &Reference,
+        l_now: &[f32],
+        cancel: &AtomicBool,
+    ) -> Result<BystanderRound, PipelineError> {
+        let (o, d) = (&spec.options, &spec.display);
+        let sweep = crate::evaluation::BystanderOptions::default();
+        let rgb = coupling(&d.projectors, &camera_rgb()).c;
+        let channels = camera_channels(&rgb, d.n_bands());
+        let settings: Vec<(EyePosition, f64, f64)> = o
+            .bystander_scan_mm
+            .iter()
+            .flat_map(|&r| head_ring(r))
+            .flat_map(|eye| {
+                let focus = &sweep.camera_focus_d;
+                sweep
+                    .camera_apertures_mm
+                    .iter()
+                    .flat_map(move |&aperture| focus.iter().map(move |&f| (eye, f, aperture)))
+            })
+            .collect();
+        let camera = |&(eye, focus, aperture): &(EyePosition, f64, f64)| {
+            transports(
+                d,
+                Lens::Achromat(&camera_lens(focus, aperture)),
+                eye,
+                &base_transport(o),
+                o.optics,
+                cache,
+            )
+            .map_err(|e| PipelineError::invalid("display", e.to_string()))
+        };
+        // Each setting's channels: (how near to reading, whether read, the known-font margin, setting, channel).
+        let looks: Vec<(f64, bool, Option<f64>, usize, usize)> = settings
+            .par_iter()
+            .enumerate()
+            .map(|(k, setting)| {
+                if cancel.load(Ordering::Relaxed) {
+                    return Err(PipelineError::Cancelled);
+                }
+                let tr = camera(setting)?;
+                let mut out = Vec::new();
+                for (c, (_, coupling)) in channels.iter().enumerate() {
+                    let cam = Observer::with_coupling(tr.clone(), coupling.clone(), d.l_max);
+                    let lum: Vec<f32> = cam.view(l_now).chunks_exact(3).map(|p| p[0]).collect();
+                    let back = crate::evaluation::unwarp(&lum, &cam.grid(), d, setting.0);
+                    let scores = [&lum, &back].map(|view| reference.score("bystander camera", view, cam.white[0]));
+                    let nearness = scores
+                        .iter()
+                        .map(|s| nearness_to_reading(s, reference))
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    let read = scores.iter().any(|s| s.readable);
+                    let margin = scores
+                        .iter()
+                        .filter_map(|s| s.known_font.as_ref().map(|k| k.margin))
+                        .reduce(f64::max);
+                    out.push((nearness, read, margin, k, c));
+                }
+                Ok(out)
+            })
+            .collect::<Result<Vec<_>, PipelineError>>()?
+            .into_iter()
+            .flatten()
+            .collect();
+        let mut near: Vec<_> = looks.iter().filter(|l| l.0 >= 0.0).collect();
+        near.sort_by(|a, b| b.0.total_cmp(&a.0));
+        near.truncate(o.bystander_decoys_per_round as usize);
+        for &&(_, _, _, k, c) in &near {
+            let cam = Observer::with_coupling(camera(&settings[k])?, channels[c].1.clone(), d.l_max);
+            let decoy = decoy_image(spec, self.target.grid(), self.others.len());
+            self.decoy_objectives.push(cam.objective(&decoy, OBJECTIVE_LEVEL));
+            self.others.push(cam);
+        }
+        Ok(BystanderRound {
+            settings: looks.len(),
+            read: looks.iter().filter(|l| l.1).count(),
+            best_margin: looks.iter().filter_map(|l| l.2).reduce(f64::max),
+            added: near.len(),
+        })
+    }
+}
+
+/// How near a view comes to reading, ≥ 0 when near enough to be held as a bystander decoy: with the known-font
+/// attacker, 1 more where it reads and its margin plus [`BYSTANDER_NEAR_MARGIN`]; without, the legibility over 0.8
+/// of the threshold.
+fn nearness_to_reading(score: &crate::evaluation::ViewScore, reference: &Reference) -> f64 {
+    match &score.known_font {
+        // A view that correlates with no glyph (dark, or flat) is nowhere near reading, whatever its margin of 0.
+        Some(k) if k.confidence <= 0.0 => f64::NEG_INFINITY,
+        Some(k) => k.margin + BYSTANDER_NEAR_MARGIN + if k.correct { 1.0 } else { 0.0 },
+        None => score.legibility - 0.8 * reference.threshold,
     }
 }
 
@@ -1075,6 +1191,41 @@ mod tests {
         };
         let (leaky, penalised) = (seen(&job(0.0)), seen(&with));
         assert!(penalised < 0.5 * leaky, "with the penalty {penalised}, without {leaky}");
+    }
+
+    #[test]
+    fn a_bystander_round_holds_the_cameras_that_read_at_a_repeat_of_the_seat() {
+        // Two block periods aside an eye sees the seat's views again through the blocks two over (the wave model's
+        // any-position transport); with no decoy the first solve shows the PIN there too, and cameras read it. The first round looks through 4 positions ×
+        // 27 lenses × 7 channels, adds the nearest to reading as decoys, and after the second solve fewer of the
+        // same settings read.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let mut spec = pin_job(pin_hint());
+        spec.display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        let repeat = 2.0 * spec.display.block_shift_at_pupil_mm(spec.display.viewing_distance_mm);
+        spec.options = EncodeOptions {
+            max_iterations: 60,
+            ensure_target_reads: false,
+            bystander_rounds: 2,
+            bystander_scan_mm: vec![repeat],
+            bystander_decoys_per_round: 16,
+            optics: crate::physics::observer::Optics::Wave,
+            ..spec.options
+        };
+        let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        let rounds = &encoded.solver.bystander_rounds;
+        assert_eq!(rounds.len(), 2, "{rounds:?}");
+        assert!(rounds.iter().all(|r| r.settings == 4 * 27 * 7), "{rounds:?}");
+        assert!(rounds[0].read > 0 && rounds[0].added == 16, "{rounds:?}");
+        assert!(rounds[1].read < rounds[0].read, "{rounds:?}");
+        assert!(rounds.iter().all(|r| r.best_margin.is_some()));
+        assert_eq!(encoded.solver.observers, 1 + rounds[0].added + rounds[1].added);
     }
 
     #[test]
