@@ -55,6 +55,8 @@ struct Encoding {
     text_hint: bool,
     /// Bystander camera rounds (`bystander_rounds`, over the default scan).
     bystander_rounds: u32,
+    /// Draws tried, the best by the encoder's own checks kept (`draws`).
+    draws: u32,
 }
 
 /// The sweep's baseline: 6 noise decoys at weight 0.3 and nothing else; each encoding below changes some of it.
@@ -77,6 +79,7 @@ const BASELINE: Encoding = Encoding {
     guard: false,
     text_hint: false,
     bystander_rounds: 0,
+    draws: 1,
 };
 
 /// Camera decoys at 0 and +2 D behind a 4 mm aperture, at the seat and on a 0.8 mm ring around it: the settings
@@ -165,9 +168,12 @@ impl Baseline {
                 camera_decoy_ring_mm: e.camera_ring_mm,
                 ensure_target_reads: e.guard,
                 bystander_rounds: e.bystander_rounds,
-                // The guard judges the target as the job would, with the slip's text hint; bystander rounds judge
-                // by it too, but leave the leak penalty as the row has it unless the hint is asked for.
-                document_text: (e.guard || e.text_hint || e.bystander_rounds > 0).then(|| self.text.clone()),
+                draws: e.draws,
+                // The guard judges the target as the job would, with the slip's text hint; bystander rounds and the
+                // draws' checks judge by it too, but leave the leak penalty as the row has it unless the hint is
+                // asked for.
+                document_text: (e.guard || e.text_hint || e.bystander_rounds > 0 || e.draws > 1)
+                    .then(|| self.text.clone()),
                 leak_glyphs: e.guard || e.text_hint,
                 ..Self::options(max_iterations)
             },
@@ -187,6 +193,18 @@ impl Baseline {
             options,
         };
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
+        for c in &enc.solver.draws {
+            eprintln!(
+                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read{}",
+                c.seed,
+                c.target_reads,
+                c.ring_read,
+                c.ring_positions,
+                c.people_read,
+                c.people,
+                if c.kept { " (kept)" } else { "" }
+            );
+        }
         for (k, r) in enc.solver.bystander_rounds.iter().enumerate() {
             eprintln!(
                 "{label}: bystander round {}: {} of {} camera settings read, best known-font margin {:?}, {} added as decoys",
@@ -642,6 +660,9 @@ pub struct Overrides {
     /// Every encoding with the target guard (`ensure_target_reads`) and the text hint, as a job runs.
     #[arg(long)]
     pub guard: bool,
+    /// Every encoding tried with this many draws, the best by the encoder's own checks kept (`draws`).
+    #[arg(long)]
+    pub draws: Option<u32>,
 }
 
 impl Overrides {
@@ -667,6 +688,10 @@ impl Overrides {
         if self.text_hint && !e.guard {
             e.text_hint = true;
             label += ", with the text hint";
+        }
+        if let Some(n) = self.draws {
+            e.draws = n;
+            label += &format!(", the best of {n} draws");
         }
         if let Some(n) = self.bystander_rounds {
             e.bystander_rounds = n;

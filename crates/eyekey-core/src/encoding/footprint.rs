@@ -94,7 +94,16 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
         + EVALUATION_CAMERA_SETTINGS
         + bystander_scan_settings(display, options);
     let d = unknowns as f64;
-    let seconds = d * observers as f64 * (BUILD_SECONDS + ITERATION_SECONDS * f64::from(options.max_iterations))
+    // Each draw (`draws`) solves again and is checked with fresh people and a tracked head ring.
+    let draws = f64::from(options.draws.max(1));
+    let checked = if options.draws > 1 {
+        u64::from(super::options::DRAW_CHECK_PEOPLE) + 21
+    } else {
+        0
+    };
+    let seconds = draws
+        * (d * observers as f64 * (BUILD_SECONDS + ITERATION_SECONDS * f64::from(options.max_iterations))
+            + d * checked as f64 * EVALUATION_SECONDS)
         + d * evaluated as f64 * EVALUATION_SECONDS;
     Footprint {
         unknowns,
@@ -160,6 +169,13 @@ mod tests {
         assert_eq!(f.observers, 13 + 8);
         let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 11_340.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
+        // Three draws: three solves, each checked with 200 fresh people, the target and 20 ring positions.
+        let o = EncodeOptions {
+            draws: 3,
+            ..Default::default()
+        };
+        let seconds = 3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * 221.0 * 2e-7) + 1e6 * 167.0 * 2e-7;
+        assert!((footprint(&d, &o, 0).seconds - seconds).abs() < 1e-6);
     }
 
     #[test]

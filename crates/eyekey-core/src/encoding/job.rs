@@ -89,9 +89,33 @@ pub struct SolverSummary {
     /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
     /// through one whose kernels are drawn with another seed.
     pub target_reads: bool,
+    /// Every draw tried and what the encoder's own checks saw of it (`draws` > 1; empty otherwise).
+    #[serde(default)]
+    pub draws: Vec<DrawCheck>,
     /// Every solve of the encode in order: the adaptive rounds', then the target guard's.
     #[serde(default)]
     pub solves: Vec<SolveStep>,
+}
+
+/// One draw of an encode with `draws` > 1 ([`SolverSummary::draws`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct DrawCheck {
+    /// The draw's seed.
+    pub seed: u64,
+    /// Whether the target reads its own view at the seat.
+    pub target_reads: bool,
+    /// Head-ring positions (1–5 mm, four directions) a tracked target reads, of `ring_positions` (0 of 0 without a
+    /// head ring).
+    pub ring_read: u32,
+    /// Head-ring positions looked at.
+    pub ring_positions: u32,
+    /// Fresh people at the seat who read, of `people`.
+    pub people_read: u32,
+    /// Fresh people looked at.
+    pub people: u32,
+    /// Whether this draw's light field was kept.
+    pub kept: bool,
 }
 
 /// One bystander camera round ([`SolverSummary::bystander_rounds`]).

@@ -174,6 +174,17 @@ pub struct EncodeOptions {
     pub bystander_scan_mm: Vec<f64>,
     /// Camera settings added as decoys per bystander round at most.
     pub bystander_decoys_per_round: u32,
+    /// Draws tried (1 = the seed alone): with n > 1 the whole encode runs for n seeds (`seed`, then seeds
+    /// [`DRAW_SEED_STEP`] apart), each drawing its own population decoys, noise and kernels, and the light field
+    /// kept is the draw that the encoder's own checks rank first: the target reads its view; then at most 1 % of
+    /// [`DRAW_CHECK_PEOPLE`] fresh people at the seat read; then, with a head ring (`head_radius_mm` > 0), the most
+    /// positions read on rings of 1–5 mm around the seat (right, left, above, below) by a tracked eye (frames
+    /// re-indexed for it); then the fewest of those people read (half with
+    /// pupils bracketing the target's when near-pupil decoys are asked), all through a kernel draw and from a
+    /// seed stream the evaluation never uses, judged as the evaluation judges (the known-font attacker where the
+    /// text is known; the legibility threshold, far more lenient, otherwise). The encoder's seed alone decides
+    /// whether a head box holds (docs/experiments.md §2c).
+    pub draws: u32,
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the last solve's end, until the target reads or the
     /// weights are down to an eighth of where they started and to 0.0375 (`GUARD_FLOOR_WEIGHT`) or below; then
@@ -230,6 +241,7 @@ impl Default for EncodeOptions {
             bystander_rounds: 0,
             bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
             bystander_decoys_per_round: 8,
+            draws: 1,
             ensure_target_reads: true,
             target_margin: 0.0,
             document_text: None,
@@ -252,6 +264,12 @@ pub const DEFAULT_DECOY_WEIGHT: f64 = 0.3;
 pub const DEFAULT_BYSTANDER_SCAN_MM: [f64; 15] = [
     10.8, 11.6, 12.4, 13.2, 14.0, 14.8, 15.6, 16.4, 17.2, 18.0, 18.8, 19.6, 20.4, 21.2, 22.0,
 ];
+
+/// How far apart the seeds of successive draws are (`draws`): beyond every offset the encoder adds to its seed.
+pub const DRAW_SEED_STEP: u64 = 1_000_003;
+
+/// Fresh people at the seat each draw is checked with (`draws`).
+pub const DRAW_CHECK_PEOPLE: u32 = 200;
 
 /// How near to reading a bystander camera setting must come to join as a decoy (`bystander_rounds`): the known-font
 /// attacker's margin (the true glyph's smallest lead over the best other, negative when a character is misread)
@@ -363,6 +381,9 @@ impl EncodeOptions {
                 "adaptive_rounds",
                 "at most 5 rounds of at most 200 candidates adding at most 16 decoys each".to_string(),
             );
+        }
+        if !(1..=8).contains(&self.draws) {
+            return bad("draws", format!("must be within 1..=8, got {}", self.draws));
         }
         if self.bystander_rounds > 3 || self.bystander_decoys_per_round > 32 {
             return bad(
