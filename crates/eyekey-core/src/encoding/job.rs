@@ -89,7 +89,8 @@ pub struct SolverSummary {
     /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
     /// through one whose kernels are drawn with another seed.
     pub target_reads: bool,
-    /// Every draw tried and what the encoder's own checks saw of it (`draws` > 1; empty otherwise).
+    /// Every draw tried and what the encoder's own checks saw of it (`draws` > 1; empty otherwise). The rest of the
+    /// summary (iterations, time, solves) is the kept draw's.
     #[serde(default)]
     pub draws: Vec<DrawCheck>,
     /// Every solve of the encode in order: the adaptive rounds', then the target guard's.
