@@ -135,11 +135,14 @@ fn check_draw(
         Default::default(),
     );
     if o.near_pupil_decoys > 0 {
-        people.extend(near_pupil_decoys(
-            spec.target.pupil_diameter_mm,
-            DRAW_CHECK_PEOPLE / 2,
-            o.seed.wrapping_add(9_500),
-        )?);
+        // In batches of 10, each from a fresh pool: one pool's ladder of pupils runs out after a few dozen rungs.
+        for batch in 0..u64::from(DRAW_CHECK_PEOPLE / 20) {
+            people.extend(near_pupil_decoys(
+                spec.target.pupil_diameter_mm,
+                10,
+                o.seed.wrapping_add(9_500 + batch),
+            )?);
+        }
     } else {
         people.extend(sample_population(
             (DRAW_CHECK_PEOPLE / 2) as usize,
