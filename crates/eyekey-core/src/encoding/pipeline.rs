@@ -46,8 +46,9 @@ pub fn encode(
         return encode_draw(spec, cache, progress, cancel);
     }
     validate_spec(spec)?;
-    let mut best: Option<(DrawRank, Encoded)> = None;
-    let mut checks = Vec::new();
+    // The first draw of the best rank is kept.
+    let mut best: Option<(usize, Encoded)> = None;
+    let mut checks: Vec<DrawCheck> = Vec::new();
     for k in 0..n {
         let mut draw = spec.clone();
         draw.options.seed = spec.options.seed.wrapping_add(u64::from(k) * DRAW_SEED_STEP);
@@ -55,19 +56,16 @@ pub fn encode(
         let part = |p: f64| progress((f64::from(k) + p) / f64::from(n));
         let encoded = encode_draw(&draw, cache, &part, cancel)?;
         let check = check_draw(spec, &draw.options, &encoded, cache, cancel)?;
-        let rank = DrawRank::of(&check);
-        checks.push(check);
-        if best.as_ref().is_none_or(|(b, _)| rank > *b) {
-            best = Some((rank, encoded));
+        if best
+            .as_ref()
+            .is_none_or(|(b, _)| DrawRank::of(&check) > DrawRank::of(&checks[*b]))
+        {
+            best = Some((checks.len(), encoded));
         }
+        checks.push(check);
     }
-    let (rank, mut kept) = best.expect("at least two draws");
-    // Only the first draw of the best rank is kept.
-    let mut seen = false;
-    for c in &mut checks {
-        c.kept = !seen && DrawRank::of(c) == rank;
-        seen |= c.kept;
-    }
+    let (at, mut kept) = best.expect("at least two draws");
+    checks[at].kept = true;
     kept.solver.draws = checks;
     Ok(kept)
 }
