@@ -55,6 +55,10 @@ struct Encoding {
     text_hint: bool,
     /// Bystander camera rounds (`bystander_rounds`, over the default scan).
     bystander_rounds: u32,
+    /// Head-box rounds (`head_rounds`).
+    head_rounds: u32,
+    /// Adaptive decoy rounds (`adaptive_rounds`, with the encoder's default candidates).
+    adaptive_rounds: u32,
     /// Draws tried, the best by the encoder's own checks kept (`draws`).
     draws: u32,
 }
@@ -79,6 +83,8 @@ const BASELINE: Encoding = Encoding {
     guard: false,
     text_hint: false,
     bystander_rounds: 0,
+    head_rounds: 0,
+    adaptive_rounds: 0,
     draws: 1,
 };
 
@@ -168,11 +174,18 @@ impl Baseline {
                 camera_decoy_ring_mm: e.camera_ring_mm,
                 ensure_target_reads: e.guard,
                 bystander_rounds: e.bystander_rounds,
+                head_rounds: e.head_rounds,
+                adaptive_rounds: e.adaptive_rounds,
                 draws: e.draws,
                 // The guard judges the target as the job would, with the slip's text hint; bystander rounds and the
                 // draws' checks judge by it too, but leave the leak penalty as the row has it unless the hint is
                 // asked for.
-                document_text: (e.guard || e.text_hint || e.bystander_rounds > 0 || e.draws > 1)
+                document_text: (e.guard
+                    || e.text_hint
+                    || e.bystander_rounds > 0
+                    || e.head_rounds > 0
+                    || e.adaptive_rounds > 0
+                    || e.draws > 1)
                     .then(|| self.text.clone()),
                 leak_glyphs: e.guard || e.text_hint,
                 ..Self::options(max_iterations)
@@ -203,6 +216,23 @@ impl Baseline {
                 c.people_read,
                 c.people,
                 if c.kept { " (kept)" } else { "" }
+            );
+        }
+        for (k, n) in enc.solver.adaptive_decoys_added.iter().enumerate() {
+            eprintln!("{label}: adaptive round {}: {n} people added as decoys", k + 1);
+        }
+        for (k, r) in enc.solver.head_rounds.iter().enumerate() {
+            let added: Vec<String> = r.added.iter().map(|[x, y]| format!("({x:.2}, {y:.2})")).collect();
+            eprintln!(
+                "{label}: head-box round {}: the tracked target read at {} of {} positions; added {}",
+                k + 1,
+                r.read,
+                r.positions,
+                if added.is_empty() {
+                    "none".to_string()
+                } else {
+                    added.join(", ") + " mm"
+                }
             );
         }
         for (k, r) in enc.solver.bystander_rounds.iter().enumerate() {
@@ -657,6 +687,15 @@ pub struct Overrides {
     /// known-font attacker, and the leak penalty stays as the row has it (glyphs only with `--text-hint`).
     #[arg(long)]
     pub bystander_rounds: Option<u32>,
+    /// Every encoding with this many head-box rounds (`head_rounds`): the tracked target looks from rings of 1–5
+    /// mm and where it misreads, the place it sees the design views from joins its stacked positions; they judge
+    /// by the slip's known-font attacker, the leak penalty as the row has it.
+    #[arg(long)]
+    pub head_rounds: Option<u32>,
+    /// Every encoding with this many adaptive decoy rounds (`adaptive_rounds`): fresh people at the seat who
+    /// still read join as decoys; judged by the slip's known-font attacker.
+    #[arg(long)]
+    pub adaptive_rounds: Option<u32>,
     /// Every encoding with the target guard (`ensure_target_reads`) and the text hint, as a job runs.
     #[arg(long)]
     pub guard: bool,
@@ -692,6 +731,14 @@ impl Overrides {
         if let Some(n) = self.draws {
             e.draws = n;
             label += &format!(", the best of {n} draws");
+        }
+        if let Some(n) = self.head_rounds {
+            e.head_rounds = n;
+            label += &format!(", {n} head-box round(s)");
+        }
+        if let Some(n) = self.adaptive_rounds {
+            e.adaptive_rounds = n;
+            label += &format!(", {n} adaptive round(s)");
         }
         if let Some(n) = self.bystander_rounds {
             e.bystander_rounds = n;

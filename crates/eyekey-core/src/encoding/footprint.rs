@@ -64,6 +64,7 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
         0
     };
     let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round)
+        + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_MAX_ADDED)
         + u64::from(options.bystander_rounds) * u64::from(options.bystander_decoys_per_round);
     target
         + u64::from(options.population_decoys)
@@ -92,7 +93,8 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
     let evaluated = u64::from(options.evaluation_population)
         + extra_observers as u64
         + EVALUATION_CAMERA_SETTINGS
-        + bystander_scan_settings(display, options);
+        + bystander_scan_settings(display, options)
+        + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_POSITIONS);
     let d = unknowns as f64;
     // Each draw (`draws`) solves again and is checked with fresh people and a tracked head ring.
     let draws = f64::from(options.draws.max(1));
@@ -168,6 +170,15 @@ mod tests {
         let f = footprint(&d, &o, 0);
         assert_eq!(f.observers, 13 + 8);
         let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 11_340.0) * 2e-7;
+        assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
+        // Two head-box rounds: up to 4 tracked positions each, and 20 ring positions looked from each.
+        let o = EncodeOptions {
+            head_rounds: 2,
+            ..Default::default()
+        };
+        let f = footprint(&d, &o, 0);
+        assert_eq!(f.observers, 13 + 8);
+        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 40.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Three draws: three solves, each checked with 200 fresh people, the target and 20 ring positions.
         let o = EncodeOptions {

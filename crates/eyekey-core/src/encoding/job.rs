@@ -77,6 +77,9 @@ pub struct SolverSummary {
     pub observers: usize,
     /// Decoys added by each adaptive round.
     pub adaptive_decoys_added: Vec<usize>,
+    /// What each head-box round (`head_rounds`) saw and added.
+    #[serde(default)]
+    pub head_rounds: Vec<HeadRound>,
     /// What each bystander camera round (`bystander_rounds`) saw and added.
     #[serde(default)]
     pub bystander_rounds: Vec<BystanderRound>,
@@ -117,6 +120,18 @@ pub struct DrawCheck {
     pub people: u32,
     /// Whether this draw's light field was kept.
     pub kept: bool,
+}
+
+/// One head-box round ([`SolverSummary::head_rounds`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct HeadRound {
+    /// Ring positions the tracked target looked from.
+    pub positions: u32,
+    /// Of those, the positions where it read.
+    pub read: u32,
+    /// Eye positions (x, y, mm from the seat) added to the target's stacked positions.
+    pub added: Vec<[f64; 2]>,
 }
 
 /// One bystander camera round ([`SolverSummary::bystander_rounds`]).

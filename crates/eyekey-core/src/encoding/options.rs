@@ -161,6 +161,15 @@ pub struct EncodeOptions {
     /// what it sees, reads those frames (docs/experiments.md §2c).
     #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 20.0))]
     pub camera_decoy_ring_mm: f64,
+    /// Head-box rounds (0 = off), for a display that re-indexes the frames for the tracked eye
+    /// ([`retarget`](crate::physics::tracking::retarget)); wave optics only. After each solve, the target, its
+    /// frames re-indexed, looks from rings of 1–5 mm around the seat (right, left, above, below; 20 positions)
+    /// through a kernel draw of its own; up to [`HEAD_ROUND_MAX_ADDED`] positions where it does not read (the
+    /// evaluation's judge, with `target_margin`), the most misread first, join the target's stacked positions as
+    /// the tracked eye there (the operator T·R, `TransportOptions::tracked`; weight `head_weight`), and the
+    /// solve runs again from its end.
+    #[cfg_attr(feature = "openapi", schema(maximum = 3))]
+    pub head_rounds: u32,
     /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
     /// focus and aperture of [`BystanderOptions::default`](crate::evaluation::BystanderOptions), behind the
     /// sensor's R, G and B and behind each band's filter) looks from `bystander_scan_mm` to the right, left,
@@ -177,7 +186,7 @@ pub struct EncodeOptions {
     /// Draws tried (1 = the seed alone): with n > 1 the whole encode runs for n seeds (`seed`, then seeds
     /// [`DRAW_SEED_STEP`] apart), each drawing its own population decoys, noise and kernels, and the light field
     /// kept is the draw that the encoder's own checks rank first: the target reads its view; then at most 1 % of
-    /// [`DRAW_CHECK_PEOPLE`] fresh people at the seat read; then, with a head ring (`head_radius_mm` > 0), the most
+    /// [`DRAW_CHECK_PEOPLE`] fresh people at the seat read; then, with a head ring (`head_radius_mm` > 0) or head-box rounds, the most
     /// positions read on rings of 1–5 mm around the seat (right, left, above, below) by a tracked eye (frames
     /// re-indexed for it); then the fewest of those people read (half with
     /// pupils bracketing the target's when near-pupil decoys are asked), all through a kernel draw and from a
@@ -238,6 +247,7 @@ impl Default for EncodeOptions {
             camera_decoy_aperture_mm: 6.0,
             camera_decoy_extra_apertures_mm: vec![],
             camera_decoy_ring_mm: 0.0,
+            head_rounds: 0,
             bystander_rounds: 0,
             bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
             bystander_decoys_per_round: 8,
@@ -270,6 +280,12 @@ pub const DRAW_SEED_STEP: u64 = 1_000_003;
 
 /// Fresh people at the seat each draw is checked with (`draws`).
 pub const DRAW_CHECK_PEOPLE: u32 = 200;
+
+/// Stacked positions a head-box round adds at most (`head_rounds`).
+pub const HEAD_ROUND_MAX_ADDED: u32 = 4;
+
+/// Ring positions a head-box round looks from (`head_rounds`): 1–5 mm, right, left, above and below.
+pub const HEAD_ROUND_POSITIONS: u32 = 20;
 
 /// How near to reading a bystander camera setting must come to join as a decoy (`bystander_rounds`): the known-font
 /// attacker's margin (the true glyph's smallest lead over the best other, negative when a character is misread)
@@ -384,6 +400,15 @@ impl EncodeOptions {
         }
         if !(1..=8).contains(&self.draws) {
             return bad("draws", format!("must be within 1..=8, got {}", self.draws));
+        }
+        if self.head_rounds > 3 {
+            return bad("head_rounds", format!("must be within 0..=3, got {}", self.head_rounds));
+        }
+        if self.head_rounds > 0 && self.optics != crate::physics::observer::Optics::Wave {
+            return bad(
+                "head_rounds",
+                "the tracked eye is modelled under wave optics only (optics \"wave\")".to_string(),
+            );
         }
         if self.bystander_rounds > 3 || self.bystander_decoys_per_round > 32 {
             return bad(
@@ -522,6 +547,22 @@ mod tests {
             assert!(nearest > 0.39, "{r}");
         }
         assert_eq!(EncodeOptions::default().bystander_rounds, 0, "off by default");
+    }
+
+    #[test]
+    fn head_box_rounds_are_bounded_and_need_wave_optics() {
+        let with = |rounds: u32, optics: Optics| EncodeOptions {
+            head_rounds: rounds,
+            optics,
+            ..Default::default()
+        };
+        assert!(with(3, Optics::Wave).validate().is_ok());
+        for refused in [with(4, Optics::Wave), with(1, Optics::Geometric)] {
+            let e = refused.validate().unwrap_err().to_string();
+            assert!(e.contains("head_rounds"), "{e}");
+        }
+        assert!(with(0, Optics::Geometric).validate().is_ok());
+        assert_eq!(EncodeOptions::default().head_rounds, 0, "off by default");
     }
 
     #[test]

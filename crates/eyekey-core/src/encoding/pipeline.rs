@@ -83,7 +83,7 @@ impl DrawRank {
 }
 
 /// The encoder's own look at one draw's light field: the target at the seat, a tracked target on rings of 1–5 mm
-/// (with a head ring), and [`DRAW_CHECK_PEOPLE`] fresh people at the seat, through a kernel draw and people the
+/// (with a head ring or head-box rounds), and [`DRAW_CHECK_PEOPLE`] fresh people at the seat, through a kernel draw and people the
 /// evaluation never uses.
 fn check_draw(
     spec: &JobSpec,
@@ -113,7 +113,7 @@ fn check_draw(
         reference = reference.with_known_font(attacker);
     }
     let reads = |o: &Observer, l: &[f32]| reference.score_observer("check", o, l).0.readable;
-    let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 {
+    let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 || o.head_rounds > 0 {
         (1..=5).flat_map(|r| head_ring(f64::from(r))).collect()
     } else {
         Vec::new()
@@ -168,6 +168,9 @@ fn check_draw(
 /// The seed of the draw check's kernels, against the encoder's.
 const DRAW_CHECK_SEED: u64 = 0xD4A7_5EED;
 
+/// The seed of the head-box rounds' kernels, against the encoder's.
+const HEAD_CHECK_SEED: u64 = 0x4EAD_B0C5;
+
 /// One draw of an encode.
 fn encode_draw(
     spec: &JobSpec,
@@ -183,7 +186,7 @@ fn encode_draw(
     let rounds = if o.method == Method::Diffmax {
         0
     } else {
-        o.adaptive_rounds.max(o.bystander_rounds)
+        o.adaptive_rounds.max(o.bystander_rounds).max(o.head_rounds)
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
     let g = cast.target.grid();
@@ -204,6 +207,7 @@ fn encode_draw(
         seconds: 0.0,
         observers: 0,
         adaptive_decoys_added: Vec::new(),
+        head_rounds: Vec::new(),
         bystander_rounds: Vec::new(),
         draws: Vec::new(),
         unknowns: 0,
@@ -226,6 +230,11 @@ fn encode_draw(
             let people = cast.add_adaptive_decoys(spec, cache, &reference, &l_now, round, cancel)?;
             summary.adaptive_decoys_added.push(people);
             added += people;
+        }
+        if round < o.head_rounds {
+            let head = cast.add_head_positions(spec, cache, &reference, &l_now, cancel)?;
+            added += head.added.len();
+            summary.head_rounds.push(head);
         }
         if round < o.bystander_rounds {
             let cameras = cast.add_bystander_decoys(spec, cache, &reference, &l_now, cancel)?;
@@ -446,6 +455,8 @@ struct Cast {
     /// ‖S'_t‖², the scale of the data term.
     energy: f64,
     moved: Vec<Observer>,
+    /// The tracked eye positions head-box rounds added (`head_rounds`), the last of `moved`.
+    head_added: Vec<EyePosition>,
     others: Vec<Observer>,
     decoy_objectives: Vec<Vec<f32>>,
     /// What no decoy may see (the leak penalty's directions), when `leak_weight` > 0.
@@ -500,6 +511,7 @@ impl Cast {
             leak,
             attacker,
             moved: head_box_observers(spec, cache)?,
+            head_added: Vec::new(),
             others: Vec::new(),
             decoy_objectives: Vec::new(),
             target,
@@ -626,6 +638,73 @@ impl Cast {
 }
 
 impl Cast {
+    /// A head-box round (`head_rounds`): the target, shown `l_now` re-indexed for its eye, looks from rings of
+    /// 1–5 mm; where it does not read, the tracked target there (T·R, `TransportOptions::tracked`) joins its
+    /// stacked positions, the most misread first. Returns what the round saw and added.
+    fn add_head_positions(
+        &mut self,
+        spec: &JobSpec,
+        cache: &TransportCache,
+        reference: &Reference,
+        l_now: &[f32],
+        cancel: &AtomicBool,
+    ) -> Result<HeadRound, PipelineError> {
+        let (o, d) = (&spec.options, &spec.display);
+        let topts = TransportOptions {
+            seed: o.seed ^ HEAD_CHECK_SEED,
+            ..base_transport(o)
+        };
+        let looks: Vec<EyePosition> = (1..=5).flat_map(|r| head_ring(f64::from(r))).collect();
+        debug_assert_eq!(looks.len() as u32, HEAD_ROUND_POSITIONS);
+        // Each position's lead: the known-font margin where the text is known (the legibility over the threshold
+        // otherwise), and whether the target reads there.
+        let seen: Vec<(f64, bool)> = looks
+            .par_iter()
+            .map(|&eye| {
+                if cancel.load(Ordering::Relaxed) {
+                    return Err(PipelineError::Cancelled);
+                }
+                let moved = Observer::new(d, &spec.target, eye, &topts, o.optics, cache)
+                    .map_err(|e| observer_error("target profile", e))?;
+                let score = reference
+                    .score_observer("target", &moved, &crate::physics::tracking::retarget(d, l_now, eye))
+                    .0;
+                let reads = score.readable && score.known_font.as_ref().is_none_or(|k| k.margin >= o.target_margin);
+                let lead = score
+                    .known_font
+                    .as_ref()
+                    .map_or(score.legibility - reference.threshold, |k| k.margin);
+                Ok((lead, reads))
+            })
+            .collect::<Result<_, PipelineError>>()?;
+        let mut missed: Vec<(f64, EyePosition)> = looks
+            .iter()
+            .zip(&seen)
+            .filter(|(eye, (_, reads))| !reads && !self.head_added.contains(eye))
+            .map(|(eye, (lead, _))| (*lead, *eye))
+            .collect();
+        missed.sort_by(|a, b| a.0.total_cmp(&b.0));
+        missed.truncate(HEAD_ROUND_MAX_ADDED as usize);
+        let tracked = TransportOptions {
+            tracked: true,
+            ..base_transport(o)
+        };
+        let mut added = Vec::new();
+        for (_, eye) in missed {
+            self.moved.push(
+                Observer::new(d, &spec.target, eye, &tracked, o.optics, cache)
+                    .map_err(|e| observer_error("target profile", e))?,
+            );
+            self.head_added.push(eye);
+            added.push([eye.x_mm, eye.y_mm]);
+        }
+        Ok(HeadRound {
+            positions: looks.len() as u32,
+            read: seen.iter().filter(|s| s.1).count() as u32,
+            added,
+        })
+    }
+
     /// Bystander camera decoys (`bystander_rounds`): the threat model's focus-sweeping camera looks at `l_now` from
     /// `bystander_scan_mm` in four directions, through the encoder's own kernel draw; the settings nearest to
     /// reading (as seen or unwarped, the evaluation's two readings) join as decoys, most nearly read first.
@@ -1363,6 +1442,59 @@ mod tests {
         assert!(rounds[1].read < rounds[0].read, "{rounds:?}");
         assert!(rounds.iter().all(|r| r.best_margin.is_some()));
         assert_eq!(encoded.solver.observers, 1 + rounds[0].added + rounds[1].added);
+    }
+
+    #[test]
+    fn a_head_box_round_stacks_the_tracked_target_where_it_misreads() {
+        // Decoys beside the seat take the reading from a tracked target at most of the 20 ring positions; the
+        // round adds up to four of them as tracked eyes (none twice), and the next round sees the tracked target
+        // read at more positions (measured: 5, then 15 of 20).
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let mut spec = pin_job(pin_hint());
+        spec.display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        spec.target.pupil_diameter_mm = 4.0;
+        spec.options = EncodeOptions {
+            max_iterations: 60,
+            ensure_target_reads: false,
+            head_rounds: 2,
+            near_pupil_decoys: 2,
+            near_pupil_ring_mm: 0.8,
+            decoy_weight: Some(0.3),
+            optics: crate::physics::observer::Optics::Wave,
+            ..spec.options
+        };
+        let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        let rounds = &encoded.solver.head_rounds;
+        assert!(!rounds.is_empty() && rounds.iter().all(|r| r.positions == HEAD_ROUND_POSITIONS));
+        let first = &rounds[0];
+        assert!(first.read < first.positions && !first.added.is_empty(), "{rounds:?}");
+        let added: Vec<[f64; 2]> = rounds.iter().flat_map(|r| r.added.iter().copied()).collect();
+        let ring: Vec<[f64; 2]> = (1..=5)
+            .flat_map(|r| head_ring(f64::from(r)))
+            .map(|e| [e.x_mm, e.y_mm])
+            .collect();
+        for (k, a) in added.iter().enumerate() {
+            assert!(ring.contains(a), "{a:?} is no ring position");
+            assert!(!added[..k].contains(a), "{a:?} twice");
+        }
+        assert!(rounds.iter().all(|r| r.added.len() as u32 <= HEAD_ROUND_MAX_ADDED));
+        assert_eq!(encoded.solver.observers, 1 + 4 + added.len());
+        if rounds.len() > 1 {
+            assert!(rounds[1].read > first.read, "{rounds:?}");
+        }
+        // Not under geometric optics, where the tracked eye is not modelled.
+        let mut geometric = spec.clone();
+        geometric.options.optics = crate::physics::observer::Optics::Geometric;
+        assert!(matches!(
+            encode(&geometric, &cache, &|_| {}, &cancel),
+            Err(PipelineError::Invalid { field, .. }) if field == "options.head_rounds"
+        ));
     }
 
     #[test]

@@ -82,12 +82,16 @@ impl TransportCache {
         eye: EyePosition,
         options: &TransportOptions,
     ) -> serde_json::Value {
-        serde_json::json!({
+        let mut key = serde_json::json!({
             "display": display, "wavefront": wavefront, "eye": eye,
             "sub_rays": options.sub_rays, "seed": options.seed,
             "oversample": options.retina_oversample, "terms": options.derivative_terms, "wave": options.wave,
             "sequence": options.sequence,
-        })
+        });
+        if options.tracked {
+            key["tracked"] = serde_json::Value::Bool(true);
+        }
+        key
     }
 
     /// The operator cached under `key`, or `build`'s (built outside the lock, then cached): for operators

@@ -82,6 +82,10 @@ pub struct TransportOptions {
     pub wavelengths_per_band: u32,
     /// How the shift-invariant kernels' sub-rays are drawn (docs/design.md §2.7).
     pub sequence: SubRaySequence,
+    /// The frames are re-indexed for this eye ([`crate::physics::tracking::retarget`]): the operator is T·R, what
+    /// the eye sees of frames encoded for the design position and shown re-indexed for it, so that the encoder
+    /// can ask a tracked eye for the document. Wave-optics builds at the design distance only (per-view kernels).
+    pub tracked: bool,
 }
 
 /// How the shift-invariant kernels draw each sub-ray's six uniforms (its point in the aperture, in the screen
@@ -129,6 +133,7 @@ impl Default for TransportOptions {
             max_traced_wave_bytes: super::MAX_WAVE_OPERATOR_BYTES,
             wavelengths_per_band: DEFAULT_WAVELENGTHS_PER_BAND,
             sequence: SubRaySequence::default(),
+            tracked: false,
         }
     }
 }

@@ -627,7 +627,10 @@ impl TransportMatrix {
     /// carries the geometry.
     pub(super) fn build_shift_invariant(tracer: &Tracer<'_>, rays: u32) -> Self {
         let d = tracer.display;
-        let kernels = tracer.view_kernels(rays);
+        let mut kernels = tracer.view_kernels(rays);
+        if tracer.options.tracked {
+            kernels = tracked(d, tracer.eye, tracer.options.retina_oversample, kernels);
+        }
         let n_terms = tracer.term_polys.len();
         let stats = TransportStats {
             sub_rays_traced: kernels.iter().map(|k| k.traced).sum(),
@@ -653,6 +656,45 @@ impl TransportMatrix {
             repr: super::Repr::Stencil(StencilOperator::new(d, tracer.options.retina_oversample, views)),
         }
     }
+}
+
+/// The kernels of T·R for frames re-indexed for `eye` ([`crate::physics::tracking::retarget`]): R puts into view
+/// (i, j) of block b the light of view (σ_u(i), σ_v(j)) of block b + (δ_u(i), δ_v(j)), so the eye's image
+/// Σ_b Σ_(i,j) K_(i,j)(r − o_b)·L(b + δ, σ) is Σ_b' Σ_(i,j) K_(i,j)(r − o_b' + δ·k)·L(b', σ) (o_b the block's
+/// first retinal pixel, k retinal pixels per hole pitch): view σ's kernel is view (i, j)'s moved by −δ·k.
+/// Views nothing is re-indexed from are dark. At the display's edge T·R also passes the light of blocks
+/// re-indexed from beyond it, which R leaves dark: one block's width of the view differs there.
+fn tracked(
+    d: &crate::physics::display::DisplayGeometry,
+    eye: EyePosition,
+    k: u32,
+    kernels: Vec<ViewKernel>,
+) -> Vec<ViewKernel> {
+    let (mu, mv) = crate::physics::tracking::view_shift(d, eye);
+    let (u, v) = (d.views_u as usize, d.views_v as usize);
+    let mut out: Vec<ViewKernel> = (0..kernels.len())
+        .map(|_| ViewKernel {
+            taps: Vec::new(),
+            traced: 0,
+            in_pupil: 0,
+            power: 0.0,
+        })
+        .collect();
+    for (at, mut kernel) in kernels.into_iter().enumerate() {
+        let (i, j) = (at % u, at / u);
+        let along_u = crate::physics::tracking::view_source(d, i as i64, mu, d.views_u);
+        let along_v = crate::physics::tracking::view_source(d, j as i64, mv, d.views_v);
+        let (Some((bu, si)), Some((bv, sj))) = (along_u, along_v) else {
+            continue;
+        };
+        for t in &mut kernel.taps {
+            t.dx -= (bu * i64::from(k)) as i32;
+            t.dy -= (bv * i64::from(k)) as i32;
+        }
+        out[sj as usize * u + si as usize] = kernel;
+    }
+    debug_assert!(out.len() == u * v);
+    out
 }
 
 #[cfg(test)]

@@ -78,6 +78,12 @@ fn check_options(
             reason: format!("must be within 1..=8, got {}", options.retina_oversample),
         });
     }
+    if options.tracked && !(options.wave.is_some_and(|w| w.kernel_rays > 0) && eye.dz_mm == 0.0) {
+        return Err(TransportError::Invalid {
+            field: "tracked",
+            reason: "frames re-indexed for the eye are modelled under wave optics at the design distance only".into(),
+        });
+    }
     let d_eye = display.viewing_distance_mm + eye.dz_mm;
     if !(d_eye.is_finite() && d_eye > 10.0) {
         return Err(TransportError::Invalid {
