@@ -688,7 +688,7 @@ pub struct Overrides {
     #[arg(long)]
     pub bystander_rounds: Option<u32>,
     /// Every encoding with this many head-box rounds (`head_rounds`): the tracked target looks from rings of 1–5
-    /// mm and where it misreads, the place it sees the design views from joins its stacked positions; they judge
+    /// mm and where it misreads, the tracked target there joins its stacked positions; they judge
     /// by the slip's known-font attacker, the leak penalty as the row has it.
     #[arg(long)]
     pub head_rounds: Option<u32>,

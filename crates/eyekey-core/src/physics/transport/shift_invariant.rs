@@ -628,9 +628,6 @@ impl TransportMatrix {
     pub(super) fn build_shift_invariant(tracer: &Tracer<'_>, rays: u32) -> Self {
         let d = tracer.display;
         let mut kernels = tracer.view_kernels(rays);
-        if tracer.options.tracked {
-            kernels = tracked(d, tracer.eye, tracer.options.retina_oversample, kernels);
-        }
         let n_terms = tracer.term_polys.len();
         let stats = TransportStats {
             sub_rays_traced: kernels.iter().map(|k| k.traced).sum(),
@@ -638,6 +635,9 @@ impl TransportMatrix {
             holes_seen: u64::from(d.holes_x * d.holes_y) * u64::from(kernels.iter().any(|k| k.in_pupil > 0)),
             sub_rays_off_grid: 0,
         };
+        if tracer.options.tracked {
+            kernels = tracked(d, tracer.eye, tracer.options.retina_oversample, kernels);
+        }
         let views = kernels
             .iter()
             .map(|kernel| {
@@ -663,7 +663,7 @@ impl TransportMatrix {
 /// Σ_b Σ_(i,j) K_(i,j)(r − o_b)·L(b + δ, σ) is Σ_b' Σ_(i,j) K_(i,j)(r − o_b' + δ·k)·L(b', σ) (o_b the block's
 /// first retinal pixel, k retinal pixels per hole pitch): view σ's kernel is view (i, j)'s moved by −δ·k.
 /// Views nothing is re-indexed from are dark. At the display's edge T·R also passes the light of blocks
-/// re-indexed from beyond it, which R leaves dark: one block's width of the view differs there.
+/// re-indexed from beyond it, which R leaves dark: the view differs there, as far in as the kernels reach.
 fn tracked(
     d: &crate::physics::display::DisplayGeometry,
     eye: EyePosition,
