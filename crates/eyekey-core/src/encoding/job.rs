@@ -130,7 +130,7 @@ pub struct HeadRound {
     pub positions: u32,
     /// Of those, the positions where it read.
     pub read: u32,
-    /// Eye positions (x, y, mm from the seat) added to the target's stacked positions.
+    /// Eye positions (x, y, mm from the seat) whose tracked eye joined the target's stacked positions.
     pub added: Vec<[f64; 2]>,
 }
 

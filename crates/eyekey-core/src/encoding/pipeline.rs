@@ -83,8 +83,8 @@ impl DrawRank {
 }
 
 /// The encoder's own look at one draw's light field: the target at the seat, a tracked target on rings of 1–5 mm
-/// (with a head ring or head-box rounds), and [`DRAW_CHECK_PEOPLE`] fresh people at the seat, through a kernel draw and people the
-/// evaluation never uses.
+/// (with a head ring or head-box rounds), and [`DRAW_CHECK_PEOPLE`] fresh people at the seat, through a kernel
+/// draw and people the evaluation never uses.
 fn check_draw(
     spec: &JobSpec,
     draw: &EncodeOptions,
