@@ -1409,6 +1409,19 @@ mod tests {
         assert!(penalised < 0.5 * leaky, "with the penalty {penalised}, without {leaky}");
     }
 
+    /// [`pin_job`] on a 32×32 `lenslet` display, the slip at 128 pixels a side: where the wave model's
+    /// any-position transport shows repeats of the seat and a tracked eye sees neighbouring blocks.
+    fn pin_job_on_lenslets() -> JobSpec {
+        let mut spec = pin_job(pin_hint());
+        spec.display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        spec
+    }
+
     #[test]
     fn a_bystander_round_holds_the_cameras_that_read_at_a_repeat_of_the_seat() {
         // Two block periods aside an eye sees the seat's views again through the blocks two over (the wave model's
@@ -1417,13 +1430,7 @@ mod tests {
         // same settings read.
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let mut spec = pin_job(pin_hint());
-        spec.display = DisplayGeometry {
-            holes_x: 32,
-            holes_y: 32,
-            ..DisplayGeometry::lenslet()
-        };
-        spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        let mut spec = pin_job_on_lenslets();
         let repeat = 2.0 * spec.display.block_shift_at_pupil_mm(spec.display.viewing_distance_mm);
         spec.options = EncodeOptions {
             max_iterations: 60,
@@ -1451,13 +1458,7 @@ mod tests {
         // read at more positions (measured: 5, then 15 of 20).
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let mut spec = pin_job(pin_hint());
-        spec.display = DisplayGeometry {
-            holes_x: 32,
-            holes_y: 32,
-            ..DisplayGeometry::lenslet()
-        };
-        spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        let mut spec = pin_job_on_lenslets();
         spec.target.pupil_diameter_mm = 4.0;
         spec.options = EncodeOptions {
             max_iterations: 60,

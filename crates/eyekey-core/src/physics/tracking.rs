@@ -105,18 +105,7 @@ mod tests {
         // (±2.7 mm): it sees the neighbouring block's light from 3.7 mm on, re-indexed with the block period
         // rounded to 11 screen pixels (0.2 mm off) and meant for 4.6 mm less: −0.9…1.7 mm, centred 0.4 mm from
         // the seat. Wave-optics views of re-indexed frames against design-frame eyes, over the view's central half.
-        let d = DisplayGeometry {
-            holes_x: 16,
-            holes_y: 16,
-            ..DisplayGeometry::lenslet()
-        };
-        let cache = TransportCache::default();
-        let topts = TransportOptions {
-            sub_rays: 8,
-            ..Default::default()
-        };
-        let mut p = VisionProfile::perfect();
-        p.zernike_um[7] = 0.15;
+        let (d, cache, topts, mut p) = bench();
         p.pupil_diameter_mm = 3.0;
         let l = zero_mean_frames(&d, 5);
         let at = |x_mm: f64| EyePosition {
@@ -139,6 +128,22 @@ mod tests {
         // Measured: 0.977 from 0.4 mm, 0.922 from the residual, 0.841 from −0.2 mm.
         let (off, residual) = (like(0.4), like(0.0));
         assert!(off > 0.95 && off > residual + 0.03, "0.4 mm {off}, 0 mm {residual}");
+    }
+
+    /// A 16×16 `lenslet` display, 8 sub-rays, and a perfect eye with 0.15 µm of coma.
+    fn bench() -> (DisplayGeometry, TransportCache, TransportOptions, VisionProfile) {
+        let d = DisplayGeometry {
+            holes_x: 16,
+            holes_y: 16,
+            ..DisplayGeometry::lenslet()
+        };
+        let topts = TransportOptions {
+            sub_rays: 8,
+            ..Default::default()
+        };
+        let mut p = VisionProfile::perfect();
+        p.zernike_um[7] = 0.15;
+        (d, TransportCache::default(), topts, p)
     }
 
     /// Frames whose views differ while every aperture's mean is the same (0.5 in every band): what an eye sees
@@ -167,14 +172,7 @@ mod tests {
     fn the_tracked_operator_is_the_moved_eye_looking_at_retargeted_frames() {
         // T·R built from per-view kernels against T applied to R·L (the same kernel draws): equal away from the
         // display's edge, where T·R also passes light that R leaves dark, for shifts within the block and past it.
-        let d = DisplayGeometry {
-            holes_x: 16,
-            holes_y: 16,
-            ..DisplayGeometry::lenslet()
-        };
-        let cache = TransportCache::default();
-        let mut p = VisionProfile::perfect();
-        p.zernike_um[7] = 0.15;
+        let (d, cache, _, mut p) = bench();
         p.pupil_diameter_mm = 4.0;
         let l = zero_mean_frames(&d, 9);
         for (x_mm, y_mm) in [(1.0, 0.0), (-4.8, 0.0), (5.0, -2.0), (0.0, 6.4)] {
@@ -239,18 +237,7 @@ mod tests {
     fn a_moved_eye_sees_the_design_view_through_retargeted_frames() {
         // Independent of the re-indexing: the wave-optics transport of an eye at the design position and of an
         // eye moved by whole views (within the block and past the block period), applied to random frames.
-        let d = DisplayGeometry {
-            holes_x: 16,
-            holes_y: 16,
-            ..DisplayGeometry::lenslet()
-        };
-        let cache = TransportCache::default();
-        let topts = TransportOptions {
-            sub_rays: 8,
-            ..Default::default()
-        };
-        let mut p = VisionProfile::perfect();
-        p.zernike_um[7] = 0.15;
+        let (d, cache, topts, p) = bench();
         let l = zero_mean_frames(&d, 3);
         let lum = |o: &Observer, l: &[f32]| crate::evaluation::luminance(&o.view(l));
         let design = Observer::new(&d, &p, EyePosition::default(), &topts, Optics::Wave, &cache).unwrap();
