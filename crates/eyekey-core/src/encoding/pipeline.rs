@@ -114,7 +114,7 @@ fn check_draw(
     }
     let reads = |o: &Observer, l: &[f32]| reference.score_observer("check", o, l).0.readable;
     let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 || o.head_rounds > 0 {
-        (1..=5).flat_map(|r| head_ring(f64::from(r))).collect()
+        tracked_ring()
     } else {
         Vec::new()
     };
@@ -167,6 +167,14 @@ fn check_draw(
 
 /// The seed of the draw check's kernels, against the encoder's.
 const DRAW_CHECK_SEED: u64 = 0xD4A7_5EED;
+
+/// Where the encoder looks at a tracked target (the draws' check and the head-box rounds): rings of 1–5 mm
+/// around the seat, right, left, above and below ([`HEAD_ROUND_POSITIONS`]).
+fn tracked_ring() -> Vec<EyePosition> {
+    let ring: Vec<EyePosition> = (1..=5).flat_map(|r| head_ring(f64::from(r))).collect();
+    debug_assert_eq!(ring.len() as u32, HEAD_ROUND_POSITIONS);
+    ring
+}
 
 /// The seed of the head-box rounds' kernels, against the encoder's.
 const HEAD_CHECK_SEED: u64 = 0x4EAD_B0C5;
@@ -654,8 +662,7 @@ impl Cast {
             seed: o.seed ^ HEAD_CHECK_SEED,
             ..base_transport(o)
         };
-        let looks: Vec<EyePosition> = (1..=5).flat_map(|r| head_ring(f64::from(r))).collect();
-        debug_assert_eq!(looks.len() as u32, HEAD_ROUND_POSITIONS);
+        let looks = tracked_ring();
         // Each position's lead: the known-font margin where the text is known (the legibility over the threshold
         // otherwise), and whether the target reads there.
         let seen: Vec<(f64, bool)> = looks
