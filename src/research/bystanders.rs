@@ -208,13 +208,15 @@ impl Baseline {
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
         for c in &enc.solver.draws {
             eprintln!(
-                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read{}",
+                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read, {} of {} camera settings at the seat read{}",
                 c.seed,
                 c.target_reads,
                 c.ring_read,
                 c.ring_positions,
                 c.people_read,
                 c.people,
+                c.cameras_read,
+                c.cameras,
                 if c.kept { " (kept)" } else { "" }
             );
         }

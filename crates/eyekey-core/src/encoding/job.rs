@@ -118,6 +118,13 @@ pub struct DrawCheck {
     pub people_read: u32,
     /// Fresh people looked at.
     pub people: u32,
+    /// Camera settings and channels at the seat that read (the evaluation's focus sweep through the check's own
+    /// kernels), of `cameras`.
+    #[serde(default)]
+    pub cameras_read: u32,
+    /// Camera settings and channels looked at.
+    #[serde(default)]
+    pub cameras: u32,
     /// Whether this draw's light field was kept.
     pub kept: bool,
 }

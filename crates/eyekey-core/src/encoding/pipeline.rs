@@ -70,15 +70,23 @@ pub fn encode(
     Ok(kept)
 }
 
-/// How the encoder ranks a draw: the target reads; then at most 1 % of the fresh people read (the bound at
-/// the seat); then more head-ring positions read; then fewer fresh people reading.
+/// How the encoder ranks a draw: the target reads; then fewer than 1 % of the fresh people read (under the issue's
+/// bound at the seat: kept draws whose 200 let 2 read let 12 and 17 of 1,000 read, docs/experiments.md §2c); then
+/// fewer camera settings at the seat read; then more head-ring positions read; then fewer fresh people reading.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-struct DrawRank(bool, bool, u32, std::cmp::Reverse<u32>);
+struct DrawRank(bool, bool, std::cmp::Reverse<u32>, u32, std::cmp::Reverse<u32>);
 
 impl DrawRank {
     fn of(c: &DrawCheck) -> Self {
-        let seat_held = c.people_read * 100 <= c.people;
-        Self(c.target_reads, seat_held, c.ring_read, std::cmp::Reverse(c.people_read))
+        use std::cmp::Reverse;
+        let seat_held = c.people_read * 100 < c.people;
+        Self(
+            c.target_reads,
+            seat_held,
+            Reverse(c.cameras_read),
+            c.ring_read,
+            Reverse(c.people_read),
+        )
     }
 }
 
@@ -154,6 +162,7 @@ fn check_draw(
         .collect::<Result<Vec<_>, PipelineError>>()?
         .into_iter()
         .sum();
+    let cameras = camera_scan(spec, cache, &topts, &reference, l, &[EyePosition::default()], cancel)?.looks;
     Ok(DrawCheck {
         seed: draw.seed,
         target_reads: reads(&target, l),
@@ -161,6 +170,8 @@ fn check_draw(
         ring_positions: ring.len() as u32,
         people_read,
         people: people.len() as u32,
+        cameras_read: cameras.iter().filter(|c| c.1).count() as u32,
+        cameras: cameras.len() as u32,
         kept: false,
     })
 }
@@ -724,70 +735,20 @@ impl Cast {
         l_now: &[f32],
         cancel: &AtomicBool,
     ) -> Result<BystanderRound, PipelineError> {
-        let (o, d) = (&spec.options, &spec.display);
-        let sweep = crate::evaluation::BystanderOptions::default();
-        let rgb = coupling(&d.projectors, &camera_rgb()).c;
-        let channels = camera_channels(&rgb, d.n_bands());
-        let settings: Vec<(EyePosition, f64, f64)> = o
-            .bystander_scan_mm
-            .iter()
-            .flat_map(|&r| head_ring(r))
-            .flat_map(|eye| {
-                let focus = &sweep.camera_focus_d;
-                sweep
-                    .camera_apertures_mm
-                    .iter()
-                    .flat_map(move |&aperture| focus.iter().map(move |&f| (eye, f, aperture)))
-            })
-            .collect();
-        let camera = |&(eye, focus, aperture): &(EyePosition, f64, f64)| {
-            transports(
-                d,
-                Lens::Achromat(&camera_lens(focus, aperture)),
-                eye,
-                &base_transport(o),
-                o.optics,
-                cache,
-            )
-            .map_err(|e| PipelineError::invalid("display", e.to_string()))
-        };
-        // Each setting's channels: (how near to reading, whether read, the known-font margin, setting, channel).
-        let looks: Vec<(f64, bool, Option<f64>, usize, usize)> = settings
-            .par_iter()
-            .enumerate()
-            .map(|(k, setting)| {
-                if cancel.load(Ordering::Relaxed) {
-                    return Err(PipelineError::Cancelled);
-                }
-                let tr = camera(setting)?;
-                let mut out = Vec::new();
-                for (c, (_, coupling)) in channels.iter().enumerate() {
-                    let cam = Observer::with_coupling(tr.clone(), coupling.clone(), d.l_max);
-                    let lum: Vec<f32> = cam.view(l_now).chunks_exact(3).map(|p| p[0]).collect();
-                    let back = crate::evaluation::unwarp(&lum, &cam.grid(), d, setting.0);
-                    let scores = [&lum, &back].map(|view| reference.score("bystander camera", view, cam.white[0]));
-                    let nearness = scores
-                        .iter()
-                        .map(|s| nearness_to_reading(s, reference))
-                        .fold(f64::NEG_INFINITY, f64::max);
-                    let read = scores.iter().any(|s| s.readable);
-                    let margin = scores
-                        .iter()
-                        .filter_map(|s| s.known_font.as_ref().map(|k| k.margin))
-                        .reduce(f64::max);
-                    out.push((nearness, read, margin, k, c));
-                }
-                Ok(out)
-            })
-            .collect::<Result<Vec<_>, PipelineError>>()?
-            .into_iter()
-            .flatten()
-            .collect();
+        let o = &spec.options;
+        let eyes: Vec<EyePosition> = o.bystander_scan_mm.iter().flat_map(|&r| head_ring(r)).collect();
+        let topts = base_transport(o);
+        let CameraScan {
+            settings,
+            looks,
+            channels,
+        } = camera_scan(spec, cache, &topts, reference, l_now, &eyes, cancel)?;
         let mut near: Vec<_> = looks.iter().filter(|l| l.0 >= 0.0).collect();
         near.sort_by(|a, b| b.0.total_cmp(&a.0));
         near.truncate(o.bystander_decoys_per_round as usize);
         for &&(_, _, _, k, c) in &near {
-            let cam = Observer::with_coupling(camera(&settings[k])?, channels[c].1.clone(), d.l_max);
+            let tr = camera_transports(spec, cache, &topts, &settings[k])?;
+            let cam = Observer::with_coupling(tr, channels[c].1.clone(), spec.display.l_max);
             let decoy = decoy_image(spec, self.target.grid(), self.others.len());
             self.decoy_objectives.push(cam.objective(&decoy, OBJECTIVE_LEVEL));
             self.others.push(cam);
@@ -799,6 +760,100 @@ impl Cast {
             added: near.len(),
         })
     }
+}
+
+/// A focus-sweeping camera's settings and what each of its channels makes of a light field
+/// ([`camera_scan`]).
+struct CameraScan {
+    /// (position, focus D, aperture mm) per setting.
+    settings: Vec<(EyePosition, f64, f64)>,
+    /// Per setting and channel: (how near to reading, whether read, the known-font margin, setting, channel).
+    looks: Vec<(f64, bool, Option<f64>, usize, usize)>,
+    /// The channels' names and couplings (RGB, then one-band filters).
+    channels: Vec<(String, Vec<[f64; 3]>)>,
+}
+
+/// The camera's operators at one setting (position, focus D, aperture mm), its kernels drawn with `topts`.
+fn camera_transports(
+    spec: &JobSpec,
+    cache: &TransportCache,
+    topts: &TransportOptions,
+    &(eye, focus, aperture): &(EyePosition, f64, f64),
+) -> Result<Vec<std::sync::Arc<crate::physics::transport::TransportMatrix>>, PipelineError> {
+    let d = &spec.display;
+    transports(
+        d,
+        Lens::Achromat(&camera_lens(focus, aperture)),
+        eye,
+        topts,
+        spec.options.optics,
+        cache,
+    )
+    .map_err(|e| PipelineError::invalid("display", e.to_string()))
+}
+
+/// The threat model's focus-sweeping camera (the evaluation's foci and apertures, RGB and one-band filters) looks
+/// at `l` from each of `eyes` through kernels drawn with `topts`, judged as seen and unwarped (the evaluation's
+/// two readings).
+fn camera_scan(
+    spec: &JobSpec,
+    cache: &TransportCache,
+    topts: &TransportOptions,
+    reference: &Reference,
+    l: &[f32],
+    eyes: &[EyePosition],
+    cancel: &AtomicBool,
+) -> Result<CameraScan, PipelineError> {
+    let d = &spec.display;
+    let sweep = crate::evaluation::BystanderOptions::default();
+    let rgb = coupling(&d.projectors, &camera_rgb()).c;
+    let channels = camera_channels(&rgb, d.n_bands());
+    let settings: Vec<(EyePosition, f64, f64)> = eyes
+        .iter()
+        .flat_map(|&eye| {
+            let focus = &sweep.camera_focus_d;
+            sweep
+                .camera_apertures_mm
+                .iter()
+                .flat_map(move |&aperture| focus.iter().map(move |&f| (eye, f, aperture)))
+        })
+        .collect();
+    let looks: Vec<(f64, bool, Option<f64>, usize, usize)> = settings
+        .par_iter()
+        .enumerate()
+        .map(|(k, setting)| {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(PipelineError::Cancelled);
+            }
+            let tr = camera_transports(spec, cache, topts, setting)?;
+            let mut out = Vec::new();
+            for (c, (_, coupling)) in channels.iter().enumerate() {
+                let cam = Observer::with_coupling(tr.clone(), coupling.clone(), d.l_max);
+                let lum: Vec<f32> = cam.view(l).chunks_exact(3).map(|p| p[0]).collect();
+                let back = crate::evaluation::unwarp(&lum, &cam.grid(), d, setting.0);
+                let scores = [&lum, &back].map(|view| reference.score("bystander camera", view, cam.white[0]));
+                let nearness = scores
+                    .iter()
+                    .map(|s| nearness_to_reading(s, reference))
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let read = scores.iter().any(|s| s.readable);
+                let margin = scores
+                    .iter()
+                    .filter_map(|s| s.known_font.as_ref().map(|k| k.margin))
+                    .reduce(f64::max);
+                out.push((nearness, read, margin, k, c));
+            }
+            Ok(out)
+        })
+        .collect::<Result<Vec<_>, PipelineError>>()?
+        .into_iter()
+        .flatten()
+        .collect();
+    Ok(CameraScan {
+        settings,
+        looks,
+        channels,
+    })
 }
 
 /// How near a view comes to reading, ≥ 0 when near enough to be held as a bystander decoy: with the known-font
@@ -1505,6 +1560,14 @@ mod tests {
         ));
     }
 
+    /// Camera settings and channels the draws' check looks at from the seat: the evaluation's foci × apertures ×
+    /// (RGB and one-band filters).
+    fn camera_settings() -> u32 {
+        let sweep = crate::evaluation::BystanderOptions::default();
+        let bands = pin_job(pin_hint()).display.n_bands();
+        (sweep.camera_focus_d.len() * sweep.camera_apertures_mm.len() * (3 + bands)) as u32
+    }
+
     #[test]
     fn of_several_draws_the_one_the_checks_rank_first_is_kept_whole() {
         // Three draws of a job with decoys and a head ring: each is checked, one is kept, and the light field
@@ -1527,7 +1590,7 @@ mod tests {
         assert!(
             draws
                 .iter()
-                .all(|c| c.ring_positions == 20 && c.people == DRAW_CHECK_PEOPLE),
+                .all(|c| c.ring_positions == 20 && c.people == DRAW_CHECK_PEOPLE && c.cameras == camera_settings()),
             "{draws:?}"
         );
         let kept: Vec<&DrawCheck> = draws.iter().filter(|c| c.kept).collect();
@@ -1542,20 +1605,26 @@ mod tests {
         let again = encode(&alone, &cache, &|_| {}, &cancel).unwrap();
         assert_eq!(again.light_field, encoded.light_field);
         assert!(again.solver.draws.is_empty());
-        // The rank: the target first, then at most 1 % at the seat, then the ring, then fewer people reading.
-        let check = |target_reads, ring_read, people_read| DrawCheck {
+        // The rank: the target first, then under 1 % at the seat (1 of 200, not 2), then fewer cameras reading at
+        // the seat, then the ring, then fewer people reading.
+        let check = |target_reads, cameras_read, ring_read, people_read| DrawCheck {
             seed: 0,
             target_reads,
             ring_read,
             ring_positions: 20,
             people_read,
             people: 200,
+            cameras_read,
+            cameras: 189,
             kept: false,
         };
-        assert!(DrawRank::of(&check(true, 0, 50)) > DrawRank::of(&check(false, 20, 0)));
-        assert!(DrawRank::of(&check(true, 3, 2)) > DrawRank::of(&check(true, 20, 3)));
-        assert!(DrawRank::of(&check(true, 20, 2)) > DrawRank::of(&check(true, 19, 0)));
-        assert!(DrawRank::of(&check(true, 20, 1)) > DrawRank::of(&check(true, 20, 2)));
+        let rank = |c: DrawCheck| DrawRank::of(&c);
+        assert!(rank(check(true, 9, 0, 50)) > rank(check(false, 0, 20, 0)));
+        assert!(rank(check(true, 9, 3, 1)) > rank(check(true, 0, 20, 3)));
+        assert!(rank(check(true, 9, 0, 1)) > rank(check(true, 0, 20, 2)));
+        assert!(rank(check(true, 0, 3, 1)) > rank(check(true, 1, 20, 1)));
+        assert!(rank(check(true, 1, 20, 1)) > rank(check(true, 1, 19, 0)));
+        assert!(rank(check(true, 0, 20, 0)) > rank(check(true, 0, 20, 1)));
     }
 
     #[test]
