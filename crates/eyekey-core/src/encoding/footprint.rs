@@ -74,13 +74,18 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
         + extra_observers as u64
 }
 
-/// Camera settings the bystander rounds look through: every round, each scan offset in four directions, the threat
-/// model's 27 lenses behind the sensor's R, G and B and each band's filter (189 a position with 4 bands).
-pub fn bystander_scan_settings(display: &DisplayGeometry, options: &EncodeOptions) -> u64 {
+/// Camera settings of one position's sweep: the threat model's 27 lenses behind the sensor's R, G and B and each
+/// band's filter (189 with 4 bands).
+fn camera_sweep_settings(display: &DisplayGeometry) -> u64 {
     let sweep = crate::evaluation::BystanderOptions::default();
     let lenses = (sweep.camera_focus_d.len() * sweep.camera_apertures_mm.len()) as u64;
-    let channels = 3 + display.n_bands() as u64;
-    u64::from(options.bystander_rounds) * 4 * options.bystander_scan_mm.len() as u64 * lenses * channels
+    lenses * (3 + display.n_bands() as u64)
+}
+
+/// Camera settings the bystander rounds look through: every round, each scan offset in four directions, one
+/// position's sweep each.
+pub fn bystander_scan_settings(display: &DisplayGeometry, options: &EncodeOptions) -> u64 {
+    u64::from(options.bystander_rounds) * 4 * options.bystander_scan_mm.len() as u64 * camera_sweep_settings(display)
 }
 
 /// The estimated cost of a job on `display` with `options` and `extra_observers` representative observers
@@ -96,10 +101,11 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
         + bystander_scan_settings(display, options)
         + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_POSITIONS);
     let d = unknowns as f64;
-    // Each draw (`draws`) solves again and is checked with fresh people and a tracked head ring.
+    // Each draw (`draws`) solves again and is checked with fresh people, a tracked head ring and the camera's
+    // sweep at the seat.
     let draws = f64::from(options.draws.max(1));
     let checked = if options.draws > 1 {
-        u64::from(super::options::DRAW_CHECK_PEOPLE) + 21
+        u64::from(super::options::DRAW_CHECK_PEOPLE) + 21 + camera_sweep_settings(display)
     } else {
         0
     };
@@ -180,12 +186,13 @@ mod tests {
         assert_eq!(f.observers, 13 + 8);
         let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 40.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
-        // Three draws: three solves, each checked with 200 fresh people, the target and 20 ring positions.
+        // Three draws: three solves, each checked with 200 fresh people, the target, 20 ring positions and the
+        // camera at the seat (27 lenses × 7 channels).
         let o = EncodeOptions {
             draws: 3,
             ..Default::default()
         };
-        let seconds = 3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * 221.0 * 2e-7) + 1e6 * 167.0 * 2e-7;
+        let seconds = 3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (221.0 + 189.0) * 2e-7) + 1e6 * 167.0 * 2e-7;
         assert!((footprint(&d, &o, 0).seconds - seconds).abs() < 1e-6);
     }
 
