@@ -76,7 +76,7 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
 
 /// Camera settings of one position's sweep: the threat model's 27 lenses behind the sensor's R, G and B and each
 /// band's filter (189 with 4 bands).
-fn camera_sweep_settings(display: &DisplayGeometry) -> u64 {
+pub(crate) fn camera_sweep_settings(display: &DisplayGeometry) -> u64 {
     let sweep = crate::evaluation::BystanderOptions::default();
     let lenses = (sweep.camera_focus_d.len() * sweep.camera_apertures_mm.len()) as u64;
     lenses * (3 + display.n_bands() as u64)

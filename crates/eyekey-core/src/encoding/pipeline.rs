@@ -1560,14 +1560,6 @@ mod tests {
         ));
     }
 
-    /// Camera settings and channels the draws' check looks at from the seat: the evaluation's foci × apertures ×
-    /// (RGB and one-band filters).
-    fn camera_settings() -> u32 {
-        let sweep = crate::evaluation::BystanderOptions::default();
-        let bands = pin_job(pin_hint()).display.n_bands();
-        (sweep.camera_focus_d.len() * sweep.camera_apertures_mm.len() * (3 + bands)) as u32
-    }
-
     #[test]
     fn of_several_draws_the_one_the_checks_rank_first_is_kept_whole() {
         // Three draws of a job with decoys and a head ring: each is checked, one is kept, and the light field
@@ -1588,9 +1580,9 @@ mod tests {
         let seeds: Vec<u64> = draws.iter().map(|c| c.seed).collect();
         assert_eq!(seeds, [1, 1 + DRAW_SEED_STEP, 1 + 2 * DRAW_SEED_STEP]);
         assert!(
-            draws
-                .iter()
-                .all(|c| c.ring_positions == 20 && c.people == DRAW_CHECK_PEOPLE && c.cameras == camera_settings()),
+            draws.iter().all(|c| c.ring_positions == 20
+                && c.people == DRAW_CHECK_PEOPLE
+                && u64::from(c.cameras) == crate::encoding::footprint::camera_sweep_settings(&spec.display)),
             "{draws:?}"
         );
         let kept: Vec<&DrawCheck> = draws.iter().filter(|c| c.kept).collect();
