@@ -73,4 +73,77 @@ impl SubRayDraws {
         self.n += 1;
         std::array::from_fn(|i| (self.shift[i] + n * self.alpha[i]).fract())
     }
+
+    /// The next `len` (≤ [`RAY_BATCH`]) sub-rays' first `D` uniforms, dimension by dimension (`out[i][k]` is
+    /// the k-th sub-ray's i-th; the remaining dimensions are drawn and dropped, as [`Self::next_ray`] would):
+    /// the values `len` calls of [`Self::next_ray`] give, bit for bit, in loops the compiler vectorises.
+    pub(crate) fn next_batch<const D: usize>(&mut self, len: usize, out: &mut [[f64; RAY_BATCH]; D]) {
+        assert!(len <= RAY_BATCH && D <= SUB_RAY_DIMS);
+        if self.random.is_some() || self.n + (RAY_BATCH as u64) >= 1 << 30 {
+            for k in 0..len {
+                let r = self.next_ray();
+                for (i, dim) in out.iter_mut().enumerate() {
+                    dim[k] = r[i];
+                }
+            }
+            return;
+        }
+        let base = self.n as f64;
+        for (i, dim) in out.iter_mut().enumerate() {
+            let (shift, alpha) = (self.shift[i], self.alpha[i]);
+            for (v, k) in dim.iter_mut().zip(&BATCH_INDEX).take(len) {
+                // (shift + n·α).fract(): n < 2³⁰ and shift, α in [0, 1), so x is finite in [0, 2³¹) and its
+                // truncation is the integer cast's.
+                let x = shift + (base + k) * alpha;
+                // SAFETY: x is finite and in [0, 2³¹) (above), within i32.
+                *v = x - unsafe { x.to_int_unchecked::<i32>() } as f64;
+            }
+        }
+        self.n += len as u64;
+    }
+}
+
+/// The sub-rays [`SubRayDraws::next_batch`] draws at most at once.
+pub(crate) const RAY_BATCH: usize = 64;
+
+/// 0, 1, …, `RAY_BATCH` − 1 as floats.
+const BATCH_INDEX: [f64; RAY_BATCH] = {
+    let mut a = [0.0; RAY_BATCH];
+    let mut k = 0;
+    while k < RAY_BATCH {
+        a[k] = k as f64;
+        k += 1;
+    }
+    a
+};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_is_the_sub_rays_one_at_a_time_bit_for_bit() {
+        for sequence in [SubRaySequence::Kronecker, SubRaySequence::Independent] {
+            let (mut one, mut batch) = (SubRayDraws::new(77, sequence), SubRayDraws::new(77, sequence));
+            // Past the first batch, with a short one between, and far along the sequence.
+            batch.n = 1_000_000;
+            one.n = 1_000_000;
+            for len in [RAY_BATCH, 13, RAY_BATCH, 1] {
+                let mut out = [[0.0; RAY_BATCH]; 4];
+                batch.next_batch(len, &mut out);
+                for k in 0..len {
+                    let r = one.next_ray();
+                    for (i, dim) in out.iter().enumerate() {
+                        assert_eq!(
+                            dim[k].to_bits(),
+                            r[i].to_bits(),
+                            "{sequence:?} len {len} ray {k} dim {i}"
+                        );
+                        assert!((0.0..1.0).contains(&dim[k]));
+                    }
+                }
+            }
+            assert_eq!(one.next_ray(), batch.next_ray());
+        }
+    }
 }

@@ -16,9 +16,9 @@
 
 use rayon::prelude::*;
 
-use super::rng::{SubRayDraws, SUB_RAY_DIMS};
+use super::rng::{SubRayDraws, RAY_BATCH, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
-use super::trace::{bilinear, floor, Tracer};
+use super::trace::{bilinear, floor, sin_cos_turns, Tracer};
 use crate::physics::diffraction::sinc2;
 use crate::physics::display::Aperture;
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
@@ -88,6 +88,89 @@ impl PupilTable {
             term_shift,
             max_shift,
         }
+    }
+}
+
+/// What a pinhole's pupil-sampled sub-rays need of the geometry, for [`PinholeBatch::trace`].
+struct PinholeBatch {
+    half_a: f64,
+    p_s: f64,
+    /// 1 + g/d.
+    aim: f64,
+    pitch: f64,
+    gap: f64,
+    d_eye: f64,
+    eye: [f64; 2],
+    /// The view's offset in its block.
+    off: [f64; 2],
+    r_p: f64,
+    per_distance: f64,
+    /// π·a/λ: the Airy argument per radian.
+    x_per_theta: f64,
+    /// (k − 1)/2, the block's first retinal pixel's centre.
+    origin: f64,
+    pixel: f64,
+}
+
+/// A batch's landings before the wavefront's shift (retinal pixels) and Airy arguments.
+struct PinholeLandings {
+    f: [[f64; RAY_BATCH]; 2],
+    x: [f64; RAY_BATCH],
+}
+
+impl Default for PinholeLandings {
+    fn default() -> Self {
+        Self {
+            f: [[0.0; RAY_BATCH]; 2],
+            x: [0.0; RAY_BATCH],
+        }
+    }
+}
+
+impl PinholeBatch {
+    /// Sub-rays from block `m` with uniforms `u` (point in the aperture, point in the screen pixel) through
+    /// the pupil points `points` (unit disc): what [`Tracer::ray_start`] and the pupil-sampled loop compute one
+    /// sub-ray at a time, the same operations in the same order but for the disc angle's sine and cosine
+    /// ([`sin_cos_turns`]).
+    #[inline(always)]
+    fn trace_any(&self, u: &[[f64; RAY_BATCH]; 4], points: &[[f64; 2]], m: [i64; 2], out: &mut PinholeLandings) {
+        let block = [m[0] as f64 * self.pitch, m[1] as f64 * self.pitch];
+        let aimed = [block[0] * self.aim, block[1] * self.aim];
+        for (b, p) in points.iter().enumerate().take(RAY_BATCH) {
+            let rho = self.half_a * u[0][b].sqrt();
+            let (sin, cos) = sin_cos_turns(u[1][b]);
+            let at = [rho * cos, rho * sin];
+            let mut t2 = 0.0;
+            for n in 0..2 {
+                let jitter = (u[2 + n][b] - 0.5) * self.p_s;
+                let num = at[n] - aimed[n] - self.off[n] - jitter;
+                let chief = at[n] + self.d_eye * num / self.gap - self.eye[n];
+                let theta = (p[n] * self.r_p - chief) * self.per_distance;
+                t2 += theta * theta;
+                out.f[n][b] = self.origin + (at[n] - block[n]) / self.pixel;
+            }
+            out.x[b] = self.x_per_theta * t2.sqrt();
+        }
+    }
+
+    fn trace(&self, u: &[[f64; RAY_BATCH]; 4], points: &[[f64; 2]], m: [i64; 2], out: &mut PinholeLandings) {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2(
+            g: &PinholeBatch,
+            u: &[[f64; RAY_BATCH]; 4],
+            points: &[[f64; 2]],
+            m: [i64; 2],
+            out: &mut PinholeLandings,
+        ) {
+            g.trace_any(u, points, m, out)
+        }
+        #[cfg(target_arch = "x86_64")]
+        if super::stencil::has_avx2_fma() {
+            // SAFETY: the CPU has the features `avx2` is compiled for.
+            return unsafe { avx2(self, u, points, m, out) };
+        }
+        self.trace_any(u, points, m, out)
     }
 }
 
@@ -522,6 +605,60 @@ impl Tracer<'_> {
         // Pupil-sampled (a pattern wider than the pupil): uniform pupil points from the table, each weighted by
         // the pattern's density at the angle that reaches it.
         let per_distance = 1.0 / self.d_eye;
+        let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
+        if d.aperture == Aperture::Pinhole && table.points.len() >= rays as usize {
+            // The same sub-rays a batch at a time: positions, angles and the Airy argument in loops the
+            // compiler vectorises (`PinholeBatch`), then the table and the splats one by one.
+            let geometry = PinholeBatch {
+                half_a: 0.5 * a,
+                p_s: d.screen_pixel_pitch_mm,
+                aim,
+                pitch,
+                gap: d.gap_mm,
+                d_eye: self.d_eye,
+                eye: [self.eye.x_mm, self.eye.y_mm],
+                off,
+                r_p: self.r_p,
+                per_distance,
+                x_per_theta,
+                origin: (k - 1.0) / 2.0,
+                pixel: self.grid.pixel_mm,
+            };
+            let mut u = [[0.0; RAY_BATCH]; 4];
+            let mut out = PinholeLandings::default();
+            for my in ky - nb..=ky + nb {
+                for mx in kx - nb..=kx + nb {
+                    let mut draws = self.block_draws(view, mx, my);
+                    for first in (0..rays as usize).step_by(RAY_BATCH) {
+                        let len = RAY_BATCH.min(rays as usize - first);
+                        draws.next_batch(len, &mut u);
+                        geometry.trace(&u, &table.points[first..first + len], [mx, my], &mut out);
+                        for b in 0..len {
+                            traced += 1;
+                            let ray_weight = airy_peak * airy.intensity(out.x[b]) * pupil_solid_angle;
+                            if ray_weight == 0.0 {
+                                continue;
+                            }
+                            in_pupil += 1;
+                            power += ray_weight;
+                            if power_only {
+                                continue;
+                            }
+                            let p = first + b;
+                            dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
+                            let shift = table.shift[p];
+                            kernel.splat([out.f[0][b] + shift[0], out.f[1][b] + shift[1]], ray_weight, &dfs);
+                        }
+                    }
+                }
+            }
+            return ViewKernel {
+                taps: kernel.taps(),
+                traced,
+                in_pupil,
+                power,
+            };
+        }
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let mut draws = self.block_draws(view, mx, my);

@@ -239,6 +239,11 @@ fn simd() -> Simd {
     })
 }
 
+/// Whether the CPU has the avx2 and fma instructions (checked once).
+pub(crate) fn has_avx2_fma() -> bool {
+    simd() == Simd::Avx2
+}
+
 /// The multiply-add peak of the vector code the products dispatch to, on every rayon thread, GFLOP/s (2 FLOPs
 /// per multiply-add): 128 independent lanes of x ← a·x + b in sixteen 256-bit registers, the FMA units'
 /// throughput with no loads or stores. The roofline `eyekey bench --section wave` measures against.
