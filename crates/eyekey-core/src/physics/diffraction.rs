@@ -171,6 +171,30 @@ impl AiryTable {
             + (3.0 * t2 - 2.0 * t3) * y1
             + (t3 - t2) * h * m1
     }
+
+    /// Whether [`Self::intensity`] at x ≥ 0 comes from the table (else from the formula).
+    #[inline(always)]
+    pub fn covers(&self, x: f64) -> bool {
+        x * (AIRY_TABLE_STEPS_PER_UNIT as f64) < (self.nodes.len() - 1) as f64
+    }
+
+    /// [`Self::intensity`] at x ≥ 0 where the table [`Self::covers`] it, bit for bit, and the last node's
+    /// polynomial elsewhere (meaningless there): straight-line arithmetic the compiler vectorises, for loops
+    /// that take the formula where the table does not reach.
+    #[inline(always)]
+    pub fn interpolate(&self, x: f64) -> f64 {
+        let last = f64::from_bits(((self.nodes.len() - 1) as f64).to_bits() - 1);
+        let s = (x * AIRY_TABLE_STEPS_PER_UNIT as f64).min(last);
+        // SAFETY: 0 ≤ s < nodes.len() − 1 < 2³¹ (x ≥ 0; NaN is excluded by the min), so k + 1 is a node.
+        let k = unsafe { s.max(0.0).to_int_unchecked::<i32>() } as usize;
+        let (t, h) = (s - k as f64, 1.0 / AIRY_TABLE_STEPS_PER_UNIT as f64);
+        let ([y0, m0], [y1, m1]) = unsafe { (*self.nodes.get_unchecked(k), *self.nodes.get_unchecked(k + 1)) };
+        let (t2, t3) = (t * t, t * t * t);
+        (2.0 * t3 - 3.0 * t2 + 1.0) * y0
+            + (t3 - 2.0 * t2 + t) * h * m0
+            + (3.0 * t2 - 2.0 * t3) * y1
+            + (t3 - t2) * h * m1
+    }
 }
 
 /// The fraction of the Airy pattern's power within x = π·a·θ/λ: 1 − J₀²(x) − J₁²(x) (Rayleigh).
@@ -556,6 +580,23 @@ mod tests {
         assert!(at_switch < 1e-8, "worst difference after x = 3: {at_switch:e}");
         assert_eq!(table.intensity(70.3), airy_intensity(70.3));
         assert_eq!(table.intensity(0.0), 1.0);
+    }
+
+    #[test]
+    fn the_airy_tables_branch_free_interpolation_is_its_intensity_where_it_covers() {
+        let table = DiffractionSampler::shared().airy_table();
+        let edge = AIRY_TABLE_X_MAX;
+        let below = f64::from_bits(edge.to_bits() - 1);
+        for x in (0..70_000).map(|k| k as f64 * 0.000_937).chain([0.0, 1.0, below]) {
+            assert!(table.covers(x) == (x < edge), "covers({x})");
+            if table.covers(x) {
+                assert_eq!(table.interpolate(x).to_bits(), table.intensity(x).to_bits(), "x = {x}");
+            } else {
+                assert!(table.interpolate(x).is_finite(), "x = {x}");
+            }
+        }
+        // The formula past the table's reach.
+        assert!(!table.covers(edge) && !table.covers(1e300) && table.interpolate(1e300).is_finite());
     }
 
     #[test]

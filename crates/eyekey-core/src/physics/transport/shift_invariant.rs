@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::rng::{SubRayDraws, RAY_BATCH, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, sin_cos_turns, Tracer};
-use crate::physics::diffraction::sinc2;
+use crate::physics::diffraction::{airy_intensity, sinc2, AiryTable};
 use crate::physics::display::Aperture;
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
 
@@ -92,7 +92,8 @@ impl PupilTable {
 }
 
 /// What a pinhole's pupil-sampled sub-rays need of the geometry, for [`PinholeBatch::trace`].
-struct PinholeBatch {
+struct PinholeBatch<'a> {
+    airy: &'a AiryTable,
     half_a: f64,
     p_s: f64,
     /// 1 + g/d.
@@ -112,10 +113,12 @@ struct PinholeBatch {
     pixel: f64,
 }
 
-/// A batch's landings before the wavefront's shift (retinal pixels) and Airy arguments.
+/// A batch's landings before the wavefront's shift (retinal pixels), Airy arguments and the table's
+/// intensities there ([`AiryTable::interpolate`]: meaningful where the table covers the argument).
 struct PinholeLandings {
     f: [[f64; RAY_BATCH]; 2],
     x: [f64; RAY_BATCH],
+    intensity: [f64; RAY_BATCH],
 }
 
 impl Default for PinholeLandings {
@@ -123,11 +126,12 @@ impl Default for PinholeLandings {
         Self {
             f: [[0.0; RAY_BATCH]; 2],
             x: [0.0; RAY_BATCH],
+            intensity: [0.0; RAY_BATCH],
         }
     }
 }
 
-impl PinholeBatch {
+impl PinholeBatch<'_> {
     /// Sub-rays from block `m` with uniforms `u` (point in the aperture, point in the screen pixel) through
     /// the pupil points `points` (unit disc): what [`Tracer::ray_start`] and the pupil-sampled loop compute one
     /// sub-ray at a time, the same operations in the same order but for the disc angle's sine and cosine
@@ -150,6 +154,9 @@ impl PinholeBatch {
                 out.f[n][b] = self.origin + (at[n] - block[n]) / self.pixel;
             }
             out.x[b] = self.x_per_theta * t2.sqrt();
+        }
+        for (i, x) in out.intensity.iter_mut().zip(&out.x).take(points.len()) {
+            *i = self.airy.interpolate(*x);
         }
     }
 
@@ -610,6 +617,7 @@ impl Tracer<'_> {
             // The same sub-rays a batch at a time: positions, angles and the Airy argument in loops the
             // compiler vectorises (`PinholeBatch`), then the table and the splats one by one.
             let geometry = PinholeBatch {
+                airy,
                 half_a: 0.5 * a,
                 p_s: d.screen_pixel_pitch_mm,
                 aim,
@@ -635,7 +643,13 @@ impl Tracer<'_> {
                         geometry.trace(&u, &table.points[first..first + len], [mx, my], &mut out);
                         for b in 0..len {
                             traced += 1;
-                            let ray_weight = airy_peak * airy.intensity(out.x[b]) * pupil_solid_angle;
+                            let x = out.x[b];
+                            let intensity = if airy.covers(x) {
+                                out.intensity[b]
+                            } else {
+                                airy_intensity(x)
+                            };
+                            let ray_weight = airy_peak * intensity * pupil_solid_angle;
                             if ray_weight == 0.0 {
                                 continue;
                             }
