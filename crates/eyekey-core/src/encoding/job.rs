@@ -118,8 +118,8 @@ pub struct DrawCheck {
     pub people_read: u32,
     /// Fresh people looked at.
     pub people: u32,
-    /// Camera settings and channels at the seat that read (the evaluation's focus sweep through the check's own
-    /// kernels), of `cameras`.
+    /// Camera settings and channels that read at the seat and at its first repeat 10 mm or more away, right,
+    /// left, above and below (the evaluation's focus sweep through the check's own kernels), of `cameras`.
     #[serde(default)]
     pub cameras_read: u32,
     /// Camera settings and channels looked at.

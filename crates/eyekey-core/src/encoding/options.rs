@@ -185,8 +185,10 @@ pub struct EncodeOptions {
     pub bystander_decoys_per_round: u32,
     /// Draws tried (1 = the seed alone): with n > 1 the whole encode runs for n seeds (`seed`, then seeds
     /// [`DRAW_SEED_STEP`] apart), each drawing its own population decoys, noise and kernels, and the light field
-    /// kept is the draw that the encoder's own checks rank first: the target reads its view; then at most 1 % of
-    /// [`DRAW_CHECK_PEOPLE`] fresh people at the seat read; then, with a head ring (`head_radius_mm` > 0) or
+    /// kept is the draw that the encoder's own checks rank first: the target reads its view; then fewer than 1 %
+    /// of [`DRAW_CHECK_PEOPLE`] fresh people at the seat read; then the fewest settings of the threat model's
+    /// focus-sweeping camera read, at the seat and at its first repeat 10 mm or more away (right, left, above,
+    /// below); then, with a head ring (`head_radius_mm` > 0) or
     /// head-box rounds, the most positions read on rings of 1–5 mm around the seat (right, left, above, below) by
     /// a tracked eye (frames re-indexed for it); then the fewest of those people read (half with pupils
     /// bracketing the target's when near-pupil decoys are asked), all through a kernel draw and from a

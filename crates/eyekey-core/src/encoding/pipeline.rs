@@ -162,7 +162,16 @@ fn check_draw(
         .collect::<Result<Vec<_>, PipelineError>>()?
         .into_iter()
         .sum();
-    let cameras = camera_scan(spec, cache, &topts, &reference, l, &[EyePosition::default()], cancel)?.looks;
+    let cameras = camera_scan(
+        spec,
+        cache,
+        &topts,
+        &reference,
+        l,
+        &draw_check_camera_positions(d),
+        cancel,
+    )?
+    .looks;
     Ok(DrawCheck {
         seed: draw.seed,
         target_reads: reads(&target, l),
@@ -175,6 +184,26 @@ fn check_draw(
         kept: false,
     })
 }
+
+/// Where the draws' check puts the camera: the seat, and the seat's first repeat at least
+/// [`DRAW_CHECK_CAMERA_FROM_MM`] from it (the display's period at the pupil, [`DisplayGeometry::block_shift_at_pupil_mm`],
+/// times the smallest whole number that reaches it) to the right, left, above and below, where the views the seat
+/// sees come round again (none when that lies beyond the threat model's 500 mm).
+pub(crate) fn draw_check_camera_positions(d: &DisplayGeometry) -> Vec<EyePosition> {
+    let period = d.block_shift_at_pupil_mm(d.viewing_distance_mm);
+    let mut eyes = vec![EyePosition::default()];
+    if period > 0.0 {
+        let repeat = (DRAW_CHECK_CAMERA_FROM_MM / period - 1e-9).ceil().max(1.0) * period;
+        if repeat <= 500.0 {
+            eyes.extend(head_ring(repeat));
+        }
+    }
+    eyes
+}
+
+/// The threat model's nearest bystander (docs/design.md §6): the draws' check looks at the seat's first repeat
+/// this far from it or farther.
+pub(crate) const DRAW_CHECK_CAMERA_FROM_MM: f64 = 10.0;
 
 /// The seed of the draw check's kernels, against the encoder's.
 const DRAW_CHECK_SEED: u64 = 0xD4A7_5EED;
@@ -1561,6 +1590,33 @@ mod tests {
     }
 
     #[test]
+    fn the_draws_camera_looks_from_the_seat_and_its_first_repeat_past_10_mm() {
+        // `secure` repeats every p_h(1 + f/d)·d/f = 6.4 mm at the pupil (docs/design.md §2): 10 mm is past the
+        // first repeat, so the second, 12.8 mm, in four directions.
+        let secure = DisplayGeometry::secure();
+        assert!((secure.block_shift_at_pupil_mm(secure.viewing_distance_mm) - 6.4).abs() < 1e-9);
+        let eyes = draw_check_camera_positions(&secure);
+        assert_eq!(eyes.len(), 5);
+        assert_eq!(eyes[0], EyePosition::default());
+        for (e, want) in eyes[1..]
+            .iter()
+            .zip([(12.8, 0.0), (-12.8, 0.0), (0.0, 12.8), (0.0, -12.8)])
+        {
+            assert!(
+                (e.x_mm - want.0).abs() < 1e-9 && (e.y_mm - want.1).abs() < 1e-9,
+                "{e:?}"
+            );
+        }
+        // A period of exactly 10 mm is its own first repeat; one past the threat model's 500 mm leaves the seat.
+        let mut d = secure.clone();
+        d.hole_pitch_mm *= 10.0 / 6.4;
+        let eyes = draw_check_camera_positions(&d);
+        assert!(eyes.len() == 5 && (eyes[1].x_mm - 10.0).abs() < 1e-9, "{eyes:?}");
+        d.hole_pitch_mm *= 60.0;
+        assert_eq!(draw_check_camera_positions(&d), vec![EyePosition::default()]);
+    }
+
+    #[test]
     fn of_several_draws_the_one_the_checks_rank_first_is_kept_whole() {
         // Three draws of a job with decoys and a head ring: each is checked, one is kept, and the light field
         // returned is that draw's own encode, bit for bit.
@@ -1582,7 +1638,9 @@ mod tests {
         assert!(
             draws.iter().all(|c| c.ring_positions == 20
                 && c.people == DRAW_CHECK_PEOPLE
-                && u64::from(c.cameras) == crate::encoding::footprint::camera_sweep_settings(&spec.display)),
+                && u64::from(c.cameras)
+                    == crate::encoding::footprint::camera_sweep_settings(&spec.display)
+                        * draw_check_camera_positions(&spec.display).len() as u64),
             "{draws:?}"
         );
         let kept: Vec<&DrawCheck> = draws.iter().filter(|c| c.kept).collect();

@@ -529,7 +529,8 @@ impl Tracer<'_> {
 
     /// Traces view (i, j)'s kernel with `rays` sub-rays per neighbouring block (taps keyed relative to the
     /// block's first retinal pixel), from `bundle` where the angle is sampled; with `power_only`, only the light
-    /// entering the pupil is counted and no taps are made.
+    /// entering the pupil is counted and no taps are made. With `batched`, a pinhole's pupil-sampled sub-rays
+    /// are traced in batches ([`PinholeBatch`]), the same kernel to rounding; without, one at a time.
     fn view_kernel(
         &self,
         i: u32,
@@ -538,6 +539,7 @@ impl Tracer<'_> {
         table: &PupilTable,
         bundle: Option<&RayBundle>,
         power_only: bool,
+        batched: bool,
     ) -> ViewKernel {
         let d = self.display;
         let k = self.options.retina_oversample as f64;
@@ -613,9 +615,10 @@ impl Tracer<'_> {
         // the pattern's density at the angle that reaches it.
         let per_distance = 1.0 / self.d_eye;
         let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
-        if d.aperture == Aperture::Pinhole && table.points.len() >= rays as usize {
-            // The same sub-rays a batch at a time: positions, angles and the Airy argument in loops the
-            // compiler vectorises (`PinholeBatch`), then the table and the splats one by one.
+        if batched && d.aperture == Aperture::Pinhole && table.points.len() >= rays as usize {
+            // The same sub-rays a batch at a time: positions, angles, the Airy argument and the table's value
+            // there in loops the compiler vectorises (`PinholeBatch`), then the splats one by one (and the
+            // formula where the table does not reach).
             let geometry = PinholeBatch {
                 airy,
                 half_a: 0.5 * a,
@@ -746,7 +749,11 @@ impl Tracer<'_> {
             let bundle = design.samples_angle().then(|| design.ray_bundle(rays));
             views
                 .par_iter()
-                .map(|&(i, j)| design.view_kernel(i, j, rays, &table, bundle.as_deref(), true).power)
+                .map(|&(i, j)| {
+                    design
+                        .view_kernel(i, j, rays, &table, bundle.as_deref(), true, true)
+                        .power
+                })
                 .sum()
         };
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
@@ -754,7 +761,7 @@ impl Tracer<'_> {
         let bundle = self.samples_angle().then(|| self.ray_bundle(rays));
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&(i, j)| self.view_kernel(i, j, rays, &table, bundle.as_deref(), false))
+            .map(|&(i, j)| self.view_kernel(i, j, rays, &table, bundle.as_deref(), false, true))
             .collect();
         let power = if at_design {
             kernels.iter().map(|k| k.power).sum()
@@ -869,5 +876,78 @@ mod tests {
         assert!(!fast.overflow.is_empty(), "some landings reach past the box");
         assert_eq!(fast.w, corners.w);
         assert_eq!(fast.overflow, corners.overflow);
+    }
+
+    /// A pinhole's pupil-sampled kernels traced in batches are those traced one sub-ray at a time, but for the
+    /// disc angle's sine and cosine (within 2 ulp): every view's taps at the same offsets, weights and
+    /// derivative weights within 1e-6 of the largest (the taps are f32), and the same counts of sub-rays.
+    #[test]
+    fn batched_pinhole_kernels_are_the_one_at_a_time_kernels() {
+        use crate::physics::diffraction::DiffractionSampler;
+        use crate::physics::display::DisplayGeometry;
+        use crate::physics::transport::{RetinalGrid, TransportOptions, WaveSampling};
+        use crate::physics::zernike::{ZernikeCoefficients, ZernikePolynomial};
+        let display = DisplayGeometry::paper();
+        let mut c = vec![0.0; 28];
+        (c[4], c[7], c[8], c[12]) = (0.4, 0.15, -0.1, 0.12);
+        let wavefront = ZernikeCoefficients::new(4.5, c).unwrap();
+        let options = TransportOptions {
+            derivative_terms: vec![4, 7],
+            wave: Some(WaveSampling {
+                wavelength_nm: 550.0,
+                neighbour_blocks: 2,
+                kernel_rays: 200,
+            }),
+            ..Default::default()
+        };
+        // Aside and at the design position: the eye's offset enters the chief ray.
+        for eye in [
+            EyePosition::default(),
+            EyePosition {
+                x_mm: 1.7,
+                y_mm: -0.6,
+                dz_mm: 0.0,
+            },
+        ] {
+            let grid = RetinalGrid::for_display(&display, options.retina_oversample);
+            let r_p = wavefront.pupil_radius_mm();
+            let tracer = Tracer {
+                display: &display,
+                eye,
+                options: &options,
+                d_eye: display.viewing_distance_mm,
+                grid,
+                r_p,
+                poly: wavefront.polynomial(),
+                term_polys: [4, 7].iter().map(|&j| ZernikePolynomial::single_term(j)).collect(),
+                shift_per_grad: display.viewing_distance_mm * 1e-3 / grid.pixel_mm / r_p,
+                sampler: Some(DiffractionSampler::shared()),
+                wave_weight: 0.0,
+            };
+            assert!(!tracer.samples_angle(), "the paper preset's pinholes are pupil-sampled");
+            // 200 rays: three whole batches and a short one.
+            let table = PupilTable::new(&tracer, 200);
+            for (i, j) in [(0, 0), (2, 3), (4, 4)] {
+                let one = tracer.view_kernel(i, j, 200, &table, None, false, false);
+                let batch = tracer.view_kernel(i, j, 200, &table, None, false, true);
+                assert_eq!((one.traced, one.in_pupil), (batch.traced, batch.in_pupil));
+                assert!(
+                    (one.power - batch.power).abs() <= 1e-12 * one.power,
+                    "{} {}",
+                    one.power,
+                    batch.power
+                );
+                assert!(one.in_pupil > 0 && one.taps.len() > 10, "a kernel worth comparing");
+                assert_eq!(one.taps.len(), batch.taps.len());
+                let largest = one.taps.iter().fold(0f32, |m, t| m.max(t.w.abs()));
+                for (a, b) in one.taps.iter().zip(&batch.taps) {
+                    assert_eq!((a.dx, a.dy), (b.dx, b.dy));
+                    assert!((a.w - b.w).abs() <= 1e-6 * largest, "{} {}", a.w, b.w);
+                    for (da, db) in a.dw.iter().zip(&b.dw) {
+                        assert!((da - db).abs() <= 1e-6 * (largest + da.abs()), "{da} {db}");
+                    }
+                }
+            }
+        }
     }
 }
