@@ -208,7 +208,7 @@ impl Baseline {
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
         for c in &enc.solver.draws {
             eprintln!(
-                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read, {} of {} camera settings at the seat read{}",
+                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read, {} of {} camera settings read (the seat and its first repeat past 10 mm){}",
                 c.seed,
                 c.target_reads,
                 c.ring_read,

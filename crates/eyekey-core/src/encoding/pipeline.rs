@@ -72,7 +72,8 @@ pub fn encode(
 
 /// How the encoder ranks a draw: the target reads; then fewer than 1 % of the fresh people read (under the issue's
 /// bound at the seat: kept draws whose 200 let 2 read let 12 and 17 of 1,000 read, docs/experiments.md §2c); then
-/// fewer camera settings at the seat read; then more head-ring positions read; then fewer fresh people reading.
+/// fewer camera settings read (at the seat and at its first repeat 10 mm or more away); then more head-ring
+/// positions read; then fewer fresh people reading.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct DrawRank(bool, bool, std::cmp::Reverse<u32>, u32, std::cmp::Reverse<u32>);
 
@@ -1655,8 +1656,8 @@ mod tests {
         let again = encode(&alone, &cache, &|_| {}, &cancel).unwrap();
         assert_eq!(again.light_field, encoded.light_field);
         assert!(again.solver.draws.is_empty());
-        // The rank: the target first, then under 1 % at the seat (1 of 200, not 2), then fewer cameras reading at
-        // the seat, then the ring, then fewer people reading.
+        // The rank: the target first, then under 1 % at the seat (1 of 200, not 2), then fewer cameras reading (at
+        // the seat and its repeat), then the ring, then fewer people reading.
         let check = |target_reads, cameras_read, ring_read, people_read| DrawCheck {
             seed: 0,
             target_reads,
