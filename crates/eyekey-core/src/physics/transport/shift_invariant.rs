@@ -531,6 +531,7 @@ impl Tracer<'_> {
     /// block's first retinal pixel), from `bundle` where the angle is sampled; with `power_only`, only the light
     /// entering the pupil is counted and no taps are made. With `batched`, a pinhole's pupil-sampled sub-rays
     /// are traced in batches ([`PinholeBatch`]), the same kernel to rounding; without, one at a time.
+    #[allow(clippy::too_many_arguments)]
     fn view_kernel(
         &self,
         i: u32,
