@@ -616,6 +616,20 @@ impl Tracer<'_> {
         // the pattern's density at the angle that reaches it.
         let per_distance = 1.0 / self.d_eye;
         let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
+        // A sub-ray through pupil point p landing at `f` before the wavefront's shift, with weight `ray_weight`.
+        let mut land = |p: usize, f: [f64; 2], ray_weight: f64| {
+            if ray_weight == 0.0 {
+                return;
+            }
+            in_pupil += 1;
+            power += ray_weight;
+            if power_only {
+                return;
+            }
+            dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
+            let shift = table.shift[p];
+            kernel.splat([f[0] + shift[0], f[1] + shift[1]], ray_weight, &dfs);
+        };
         if batched && d.aperture == Aperture::Pinhole && table.points.len() >= rays as usize {
             // The same sub-rays a batch at a time: positions, angles, the Airy argument and the table's value
             // there in loops the compiler vectorises (`PinholeBatch`), then the splats one by one (and the
@@ -654,59 +668,32 @@ impl Tracer<'_> {
                                 airy_intensity(x)
                             };
                             let ray_weight = airy_peak * intensity * pupil_solid_angle;
-                            if ray_weight == 0.0 {
-                                continue;
-                            }
-                            in_pupil += 1;
-                            power += ray_weight;
-                            if power_only {
-                                continue;
-                            }
-                            let p = first + b;
-                            dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
-                            let shift = table.shift[p];
-                            kernel.splat([out.f[0][b] + shift[0], out.f[1][b] + shift[1]], ray_weight, &dfs);
+                            land(first + b, [out.f[0][b], out.f[1][b]], ray_weight);
                         }
                     }
                 }
             }
-            return ViewKernel {
-                taps: kernel.taps(),
-                traced,
-                in_pupil,
-                power,
-            };
-        }
-        for my in ky - nb..=ky + nb {
-            for mx in kx - nb..=kx + nb {
-                let mut draws = self.block_draws(view, mx, my);
-                for ray in 0..rays as usize {
-                    traced += 1;
-                    // The last two uniforms (the angle-sampled rays' diffraction angle) are not used: the pupil
-                    // point comes from the table.
-                    let ([ux, uy], chief) = self.ray_start(&draws.next_ray(), [mx, my], off);
-                    let p = ray % table.points.len();
-                    let [rx, ry] = table.points[p];
-                    let theta = [
-                        (rx * self.r_p - chief[0]) * per_distance,
-                        (ry * self.r_p - chief[1]) * per_distance,
-                    ];
-                    let ray_weight = density(theta) * pupil_solid_angle;
-                    if ray_weight == 0.0 {
-                        continue;
+        } else {
+            for my in ky - nb..=ky + nb {
+                for mx in kx - nb..=kx + nb {
+                    let mut draws = self.block_draws(view, mx, my);
+                    for ray in 0..rays as usize {
+                        traced += 1;
+                        // The last two uniforms (the angle-sampled rays' diffraction angle) are not used: the
+                        // pupil point comes from the table.
+                        let ([ux, uy], chief) = self.ray_start(&draws.next_ray(), [mx, my], off);
+                        let p = ray % table.points.len();
+                        let [rx, ry] = table.points[p];
+                        let theta = [
+                            (rx * self.r_p - chief[0]) * per_distance,
+                            (ry * self.r_p - chief[1]) * per_distance,
+                        ];
+                        let f = [
+                            (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm,
+                            (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm,
+                        ];
+                        land(p, f, density(theta) * pupil_solid_angle);
                     }
-                    in_pupil += 1;
-                    power += ray_weight;
-                    if power_only {
-                        continue;
-                    }
-                    dfs.copy_from_slice(&table.term_shift[p * n_terms..(p + 1) * n_terms]);
-                    let shift = table.shift[p];
-                    let f = [
-                        (k - 1.0) / 2.0 + (ux - mx as f64 * pitch) / self.grid.pixel_mm + shift[0],
-                        (k - 1.0) / 2.0 + (uy - my as f64 * pitch) / self.grid.pixel_mm + shift[1],
-                    ];
-                    kernel.splat(f, ray_weight, &dfs);
                 }
             }
         }
