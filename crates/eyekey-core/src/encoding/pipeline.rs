@@ -186,25 +186,26 @@ fn check_draw(
     })
 }
 
-/// Where the draws' check puts the camera: the seat, and the seat's first repeat at least
-/// [`DRAW_CHECK_CAMERA_FROM_MM`] from it (the display's period at the pupil, [`DisplayGeometry::block_shift_at_pupil_mm`],
-/// times the smallest whole number that reaches it) to the right, left, above and below, where the views the seat
-/// sees come round again (none when that lies beyond the threat model's 500 mm).
+/// Where the draws' check puts the camera: the seat, and the seat's first repeat at least as far from it as the
+/// threat model's nearest bystander (the display's period at the pupil,
+/// [`DisplayGeometry::block_shift_at_pupil_mm`], times the smallest whole number that reaches the nearest of
+/// [`BystanderOptions::default`](crate::evaluation::BystanderOptions)'s lateral offsets, 10 mm) to the right,
+/// left, above and below, where the views the seat sees come round again (none when that lies beyond the
+/// farthest, 500 mm).
 pub(crate) fn draw_check_camera_positions(d: &DisplayGeometry) -> Vec<EyePosition> {
+    let lateral = crate::evaluation::BystanderOptions::default().lateral_mm;
+    let nearest = lateral.iter().copied().fold(f64::INFINITY, f64::min);
+    let farthest = lateral.iter().copied().fold(0.0, f64::max);
     let period = d.block_shift_at_pupil_mm(d.viewing_distance_mm);
     let mut eyes = vec![EyePosition::default()];
     if period > 0.0 {
-        let repeat = (DRAW_CHECK_CAMERA_FROM_MM / period - 1e-9).ceil().max(1.0) * period;
-        if repeat <= 500.0 {
+        let repeat = (nearest / period - 1e-9).ceil().max(1.0) * period;
+        if repeat <= farthest {
             eyes.extend(head_ring(repeat));
         }
     }
     eyes
 }
-
-/// The threat model's nearest bystander (docs/design.md §6): the draws' check looks at the seat's first repeat
-/// this far from it or farther.
-pub(crate) const DRAW_CHECK_CAMERA_FROM_MM: f64 = 10.0;
 
 /// The seed of the draw check's kernels, against the encoder's.
 const DRAW_CHECK_SEED: u64 = 0xD4A7_5EED;

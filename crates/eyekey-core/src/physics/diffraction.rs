@@ -158,18 +158,11 @@ impl AiryTable {
     #[inline]
     pub fn intensity(&self, x: f64) -> f64 {
         let x = x.abs();
-        let s = x * AIRY_TABLE_STEPS_PER_UNIT as f64;
-        let k = s as usize;
-        if k + 1 >= self.nodes.len() {
-            return airy_intensity(x);
+        if self.covers(x) {
+            self.interpolate(x)
+        } else {
+            airy_intensity(x)
         }
-        let (t, h) = (s - k as f64, 1.0 / AIRY_TABLE_STEPS_PER_UNIT as f64);
-        let ([y0, m0], [y1, m1]) = (self.nodes[k], self.nodes[k + 1]);
-        let (t2, t3) = (t * t, t * t * t);
-        (2.0 * t3 - 3.0 * t2 + 1.0) * y0
-            + (t3 - 2.0 * t2 + t) * h * m0
-            + (3.0 * t2 - 2.0 * t3) * y1
-            + (t3 - t2) * h * m1
     }
 
     /// Whether [`Self::intensity`] at x ≥ 0 comes from the table (else from the formula).
@@ -178,9 +171,9 @@ impl AiryTable {
         x * (AIRY_TABLE_STEPS_PER_UNIT as f64) < (self.nodes.len() - 1) as f64
     }
 
-    /// [`Self::intensity`] at x ≥ 0 where the table [`Self::covers`] it, bit for bit, and the last node's
-    /// polynomial elsewhere (meaningless there): straight-line arithmetic the compiler vectorises, for loops
-    /// that take the formula where the table does not reach.
+    /// The table's cubic Hermite interpolation at x ≥ 0, [`Self::intensity`] where the table [`Self::covers`] x
+    /// and the last node's polynomial elsewhere (meaningless there): straight-line arithmetic the compiler
+    /// vectorises, for loops that take the formula where the table does not reach.
     #[inline(always)]
     pub fn interpolate(&self, x: f64) -> f64 {
         let last = f64::from_bits(((self.nodes.len() - 1) as f64).to_bits() - 1);

@@ -91,6 +91,17 @@ impl PupilTable {
     }
 }
 
+/// One axis of where the undiffracted sub-ray from point `u` of the aperture (`s`: u for a pinhole, 0 for the
+/// collimating lenslet) meets the pupil plane, from a block `aimed` = m·p_h(1 + g/d) over, the view's offset `off`
+/// and the point in the screen pixel `jitter` (the module's equation for P without the diffraction angle), for
+/// an eye `eye` aside at `d_eye`: [`Tracer::ray_start`]'s and [`PinholeBatch`]'s.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn chief_axis(u: f64, s: f64, aimed: f64, off: f64, jitter: f64, d_eye: f64, gap: f64, eye: f64) -> f64 {
+    let num = s - aimed - off - jitter;
+    u + d_eye * num / gap - eye
+}
+
 /// What a pinhole's pupil-sampled sub-rays need of the geometry, for [`PinholeBatch::trace`].
 struct PinholeBatch<'a> {
     airy: &'a AiryTable,
@@ -147,8 +158,16 @@ impl PinholeBatch<'_> {
             let mut t2 = 0.0;
             for n in 0..2 {
                 let jitter = (u[2 + n][b] - 0.5) * self.p_s;
-                let num = at[n] - aimed[n] - self.off[n] - jitter;
-                let chief = at[n] + self.d_eye * num / self.gap - self.eye[n];
+                let chief = chief_axis(
+                    at[n],
+                    at[n],
+                    aimed[n],
+                    self.off[n],
+                    jitter,
+                    self.d_eye,
+                    self.gap,
+                    self.eye[n],
+                );
                 let theta = (p[n] * self.r_p - chief) * self.per_distance;
                 t2 += theta * theta;
                 out.f[n][b] = self.origin + (at[n] - block[n]) / self.pixel;
@@ -379,8 +398,16 @@ impl Tracer<'_> {
         };
         let eye = [self.eye.x_mm, self.eye.y_mm];
         let chief = std::array::from_fn(|n| {
-            let num = s[n] - m[n] as f64 * d.hole_pitch_mm * aim - off[n] - jitter[n];
-            u[n] + self.d_eye * num / d.gap_mm - eye[n]
+            chief_axis(
+                u[n],
+                s[n],
+                m[n] as f64 * d.hole_pitch_mm * aim,
+                off[n],
+                jitter[n],
+                self.d_eye,
+                d.gap_mm,
+                eye[n],
+            )
         });
         (u, chief)
     }
