@@ -529,6 +529,11 @@ pub struct BenchProblem {
 impl BenchProblem {
     /// Builds the problem: the target reads a PIN slip, every other observer is shown a noise mask.
     pub fn new(display: &DisplayGeometry, k: usize, sub_rays: u32) -> Result<Self> {
+        Self::with_optics(display, k, sub_rays, Optics::Geometric)
+    }
+
+    /// [`Self::new`] under `optics`.
+    pub fn with_optics(display: &DisplayGeometry, k: usize, sub_rays: u32, optics: Optics) -> Result<Self> {
         let opts = TransportOptions {
             sub_rays,
             ..Default::default()
@@ -548,7 +553,7 @@ impl BenchProblem {
                     p,
                     EyePosition::default(),
                     &opts,
-                    Optics::Geometric,
+                    optics,
                     &TransportCache::disabled(),
                 )
             })
@@ -702,6 +707,55 @@ pub fn solver_bench(problem: &BenchProblem, label: &str) -> Result<(String, f64,
         }
     }
     Ok((out, f_star, secs_default))
+}
+
+/// One evaluation of a k-observer wave-optics objective (value and gradient, as the solver calls it) with the
+/// terms' kernels on one grid per band (the views' transforms shared) and with each term's own products,
+/// timed alternately in the same run; and the shared grids' set-up (every term's kernel spectra). Rows for
+/// each k in `ks` on `display`.
+pub fn shared_transforms_rows(display: &DisplayGeometry, sub_rays: u32, ks: &[usize], label: &str) -> Result<String> {
+    let mut out = String::new();
+    for &k in ks {
+        let problem = BenchProblem::with_optics(display, k, sub_rays, Optics::Wave)?;
+        let start = Instant::now();
+        let shared = problem.objective();
+        let setup = start.elapsed().as_secs_f64();
+        let separate = problem.objective().without_shared_transforms();
+        let x: Vec<f32> = (0..shared.dim())
+            .map(|i| 0.2 + 0.6 * ((i * 37 % 101) as f32 / 101.0))
+            .collect();
+        let mut grad = vec![0f32; x.len()];
+        let mut time = |o: &MultiplexObjective<'_>, reps: usize| {
+            let start = Instant::now();
+            for _ in 0..reps {
+                std::hint::black_box(o.value_and_gradient(&x, &mut grad));
+            }
+            start.elapsed().as_secs_f64() / reps as f64
+        };
+        // Warm both (the own products' spectra are computed on first use), then alternate.
+        time(&separate, 3);
+        time(&shared, 3);
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for _ in 0..3 {
+            a.push(time(&separate, 10));
+            b.push(time(&shared, 10));
+        }
+        let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+        let range = |v: &[f64]| {
+            let (lo, hi) = (best(v), v.iter().copied().fold(0.0, f64::max));
+            format!("{:.2}–{:.2}", lo * 1e3, hi * 1e3)
+        };
+        writeln!(
+            out,
+            "| {label}, {k} observers | {} | {} ms | {} ms | {:.2}× | {:.0} ms |",
+            if shared.shares_transforms() { "shared" } else { "own" },
+            range(&a),
+            range(&b),
+            best(&b) / best(&a),
+            setup * 1e3
+        )?;
+    }
+    Ok(out)
 }
 
 /// A solve's objective along the way: after 50, 100, 200 iterations (those it ran) and at its end.
@@ -909,6 +963,28 @@ impl BenchRun<'_> {
                 )?;
             }
         }
+        body.push_str(
+            "\nUnder wave optics (every band its own per-view kernels): one objective evaluation, value and gradient, \
+             with every term's kernels on one grid per band so that the light field's views and the gradient's are \
+             transformed once for all terms (\"shared\", docs/design.md §2.7), against each term's own products (its \
+             stencils or its own FFTs, the light field gathered once), alternately in this run, three rounds of ten; \
+             \"picked\" is what the objective chooses by its cost model. Set-up: building the objective with its \
+             kernels' spectra on the shared grids.\n\n",
+        );
+        body.push_str(&table_header(&[
+            "problem",
+            "picked",
+            "own products",
+            "shared transforms",
+            "shared / own (best)",
+            "set-up",
+        ]));
+        body.push_str(&shared_transforms_rows(
+            &self.display,
+            self.args.sub_rays,
+            &[2, 8, 13],
+            &format!("{} wave", self.args.preset),
+        )?);
         Ok(body)
     }
 

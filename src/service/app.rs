@@ -523,9 +523,41 @@ pub fn stop_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
 /// File in the data directory that a running server holds locked.
 pub const LOCK_FILE: &str = "eyekey.lock";
 
+/// How long a starting server waits for the data directory's lock before refusing: a server stopped a moment
+/// ago may still be letting it go (its last tasks dropping their hold, or a child process forked by another
+/// thread holding a copy of the descriptor until it execs).
+const LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Takes the data directory's lock (an advisory lock on `eyekey.lock`, released when the process ends,
-/// however it ends), so a second server cannot open the same data.
+/// however it ends), so a second server cannot open the same data; waits up to [`LOCK_WAIT`] for it.
 fn lock_data_dir(data_dir: &Path) -> anyhow::Result<std::fs::File> {
+    let start = std::time::Instant::now();
+    loop {
+        match try_lock_data_dir(data_dir) {
+            Err(e) if e.is::<Held>() && start.elapsed() < LOCK_WAIT => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            Err(e) if e.is::<Held>() => {
+                let path = data_dir.join(LOCK_FILE);
+                anyhow::bail!(
+                    "another eyekey server is using {} (it holds {}); stop it first, or give this one its own \
+                     --data-dir",
+                    data_dir.display(),
+                    path.display()
+                );
+            }
+            other => return other,
+        }
+    }
+}
+
+/// The data directory's lock is held by another open file (another server).
+#[derive(Debug, thiserror::Error)]
+#[error("the data directory's lock is held")]
+struct Held;
+
+/// One attempt at [`lock_data_dir`]: [`Held`] when another holds the lock.
+fn try_lock_data_dir(data_dir: &Path) -> anyhow::Result<std::fs::File> {
     let path = data_dir.join(LOCK_FILE);
     let file = std::fs::OpenOptions::new()
         .create(true)
@@ -540,12 +572,7 @@ fn lock_data_dir(data_dir: &Path) -> anyhow::Result<std::fs::File> {
         if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
             let e = std::io::Error::last_os_error();
             if e.kind() == std::io::ErrorKind::WouldBlock {
-                anyhow::bail!(
-                    "another eyekey server is using {} (it holds {}); stop it first, or give this one its own \
-                     --data-dir",
-                    data_dir.display(),
-                    path.display()
-                );
+                return Err(Held.into());
             }
             return Err(anyhow::Error::new(e).context(format!("locking {}", path.display())));
         }

@@ -18,6 +18,7 @@ use crate::encoding::leak::LeakPatterns;
 use crate::encoding::solver::Objective;
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::Observer;
+use crate::physics::transport::{shared_spectra, ImageSpectra, SharedSpectra, StencilOperator, ViewSpectra};
 
 /// One observer's least-squares term.
 pub struct Term<'a> {
@@ -80,6 +81,8 @@ fn sq_norm(v: &[f32]) -> f64 {
 struct Scratch {
     image: Vec<f32>,
     share: Vec<f32>,
+    /// Where the terms' kernels are held on shared grids: the transforms of the term's adjoint input.
+    spectra: Option<ImageSpectra>,
 }
 
 /// The light field gathered once for every term's forward products: its padding (the widest term's) and the
@@ -98,6 +101,12 @@ pub struct MultiplexObjective<'a> {
     /// Where every term's operators are held as per-view kernels and some run by stencils: the light field is
     /// gathered once for all of them and their adjoints are added into the gradient per view, in one pass.
     gather: Option<Gather>,
+    /// Where every term's operators are held as per-view kernels and one grid per band costs less than each
+    /// term's own products: their kernels as spectra on it, so that the light field's views and the gradient's
+    /// are transformed once for all terms (docs/design.md §2.7, "Shared transforms"). Takes the place of `gather`.
+    shared: Option<SharedSpectra>,
+    /// The shared path's transforms of the light field and per-view sums, kept from one product to the next.
+    shared_buffers: Mutex<ViewSpectra>,
     scratch: Mutex<Vec<Scratch>>,
 }
 
@@ -123,12 +132,17 @@ impl<'a> MultiplexObjective<'a> {
             .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
             .filter(|_| !bands.is_empty())
             .map(|pad| Gather { pad, bands });
+        let stencils: Option<Vec<Vec<&StencilOperator>>> = terms.iter().map(|t| t.observer.band_stencils()).collect();
+        let shared = stencils.and_then(|ops| shared_spectra(&ops, true));
+        let gather = gather.filter(|_| shared.is_none());
         let mut objective = Self {
             terms,
             n_unknowns,
             scale: 1.0 / reference_energy.max(1e-30),
             tikhonov,
             gather,
+            shared,
+            shared_buffers: Mutex::new(ViewSpectra::default()),
             scratch: Mutex::new(Vec::new()),
         };
         objective.make_scratch();
@@ -138,6 +152,7 @@ impl<'a> MultiplexObjective<'a> {
     /// Each term's buffers, sized for the path its products take.
     fn make_scratch(&mut self) {
         let gathered = self.gather.is_some();
+        let shared = self.shared.is_some();
         let scratch = self
             .terms
             .iter()
@@ -145,12 +160,15 @@ impl<'a> MultiplexObjective<'a> {
                 image: vec![0f32; t.observer.n_pixels() * 3],
                 share: vec![
                     0f32;
-                    if gathered {
+                    if shared {
+                        0
+                    } else if gathered {
                         t.observer.planes_len()
                     } else {
                         self.n_unknowns
                     }
                 ],
+                spectra: None,
             })
             .collect();
         *self.scratch.get_mut().unwrap_or_else(|e| e.into_inner()) = scratch;
@@ -203,6 +221,9 @@ impl MultiplexObjective<'_> {
     /// the same order).
     fn each_term(&self, x: &[f32], out: &mut [f32], at_view: impl Fn(&Term<'_>, &mut [f32]) -> f64 + Sync) -> Vec<f64> {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(shared) = &self.shared {
+            return self.each_term_shared(shared, &mut scratch, x, out, at_view);
+        }
         let source = self
             .gather
             .as_ref()
@@ -211,7 +232,7 @@ impl MultiplexObjective<'_> {
             .terms
             .par_iter()
             .zip(scratch.par_iter_mut())
-            .map(|(t, Scratch { image, share })| {
+            .map(|(t, Scratch { image, share, .. })| {
                 match &source {
                     Some(source) => t.observer.forward_gathered(source, x, image),
                     None => t.observer.forward_lms(x, image),
@@ -235,10 +256,79 @@ impl MultiplexObjective<'_> {
         values
     }
 
+    /// [`Self::each_term`] through kernels held on one grid per band: the light field's views transformed once,
+    /// each term's product and its adjoint input's transforms side by side, the adjoints' sum folded and
+    /// transformed once per view. The same objective to rounding (the sums run in another order).
+    fn each_term_shared(
+        &self,
+        shared: &SharedSpectra,
+        scratch: &mut [Scratch],
+        x: &[f32],
+        out: &mut [f32],
+        at_view: impl Fn(&Term<'_>, &mut [f32]) -> f64 + Sync,
+    ) -> Vec<f64> {
+        let mut views = self.shared_buffers.lock().unwrap_or_else(|e| e.into_inner());
+        shared.transform(x, &mut views);
+        let values = self
+            .terms
+            .par_iter()
+            .enumerate()
+            .zip(scratch.par_iter_mut())
+            .map(|((o, t), s)| {
+                shared.forward(o, &views, &t.observer.coupling, &mut s.image);
+                let f = at_view(t, &mut s.image);
+                s.spectra = Some(shared.image_spectra(&s.image, &t.observer.coupling));
+                f
+            })
+            .collect();
+        let images: Vec<&ImageSpectra> = scratch
+            .iter()
+            .map(|s| s.spectra.as_ref().expect("every term's transforms, just made"))
+            .collect();
+        shared.adjoint(&images, x, self.tikhonov as f32, self.scale as f32, &mut views, out);
+        values
+    }
+
     /// The same objective computed one term's light field at a time (the path for operators that are not all
     /// held as per-view kernels), to check the gathered path against.
     #[cfg(test)]
     fn without_gathering(mut self) -> Self {
+        self.gather = None;
+        self.shared = None;
+        self.make_scratch();
+        self
+    }
+
+    /// Whether the terms' kernels are held on one grid per band, their transforms shared.
+    pub fn shares_transforms(&self) -> bool {
+        self.shared.is_some()
+    }
+
+    /// The same objective without shared grids: the light field gathered once where some products run by
+    /// stencils, each term's products on its own operators (what shared grids are measured against).
+    pub fn without_shared_transforms(mut self) -> Self {
+        if self.shared.take().is_some() {
+            let stencil_bands = |t: &Term<'_>| t.observer.stencil_bands();
+            let n_bands = self.terms[0].observer.coupling.len();
+            let bands: Vec<usize> = (0..n_bands)
+                .filter(|&n| self.terms.iter().any(|t| stencil_bands(t)[n]))
+                .collect();
+            let pad = self.terms.iter().filter_map(|t| t.observer.gather_pad()).max();
+            self.gather = pad.filter(|_| !bands.is_empty()).map(|pad| Gather { pad, bands });
+        }
+        self.make_scratch();
+        self
+    }
+
+    /// The same objective with its terms' kernels on shared grids whether or not that is expected to pay.
+    #[cfg(test)]
+    fn with_sharing(mut self) -> Self {
+        let ops: Vec<Vec<&StencilOperator>> = self
+            .terms
+            .iter()
+            .map(|t| t.observer.band_stencils().expect("per-view kernels"))
+            .collect();
+        self.shared = Some(shared_spectra(&ops, false).expect("one display"));
         self.gather = None;
         self.make_scratch();
         self
@@ -616,7 +706,7 @@ mod tests {
         let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
         let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
         let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
-        let (gathered, plain) = (mk(), mk().without_gathering());
+        let (gathered, plain) = (mk().without_shared_transforms(), mk().without_gathering());
         let g = gathered.gather.as_ref().expect("a gathered light field");
         assert_eq!((g.pad, g.bands.as_slice()), (pt.max(pr), [1, 2, 3].as_slice()));
         let run = |o: &MultiplexObjective| {
@@ -632,6 +722,61 @@ mod tests {
         let (a, b) = (run(&gathered), run(&plain));
         assert!(a.1.iter().any(|g| *g != 0) && a.2.iter().any(|h| *h != 0));
         assert_eq!(a, b);
+    }
+
+    /// Kernels held on one grid per band for every term (the views' transforms shared) give the value,
+    /// gradient and curvature product of the one-term-at-a-time path to rounding; and an objective picks them
+    /// where they are expected to pay: many terms, not one.
+    #[test]
+    fn shared_grids_give_the_same_objective_to_rounding() {
+        let d = small_display();
+        let t = observer(&d, 0.1, 0.2, vec![], Optics::Wave);
+        let r = observer(&d, -0.9, 0.0, vec![], Optics::Wave);
+        let n = t.n_samples() * d.n_bands();
+        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
+        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
+        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
+        let g = t.grid();
+        let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
+        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
+        let (shared, plain) = (mk().with_sharing(), mk().without_gathering());
+        let run = |o: &MultiplexObjective| {
+            let (mut grad, mut hv) = (vec![0f32; n], vec![0f32; n]);
+            let f = o.value_and_gradient(&x, &mut grad);
+            o.curvature_product(&v, &mut hv);
+            (f, grad, hv)
+        };
+        let (a, b) = (run(&shared), run(&plain));
+        assert!((a.0 - b.0).abs() <= 1e-5 * b.0.abs(), "value {} against {}", a.0, b.0);
+        for (what, u, w) in [("gradient", &a.1, &b.1), ("curvature", &a.2, &b.2)] {
+            let largest = w.iter().fold(0f32, |m, g| m.max(g.abs()));
+            assert!(largest > 0.0, "{what}");
+            for (p, (u, w)) in u.iter().zip(w).enumerate() {
+                assert!(
+                    (u - w).abs() <= 1e-5 * largest,
+                    "{what} {p}: {u} against {w} (largest {largest})"
+                );
+            }
+        }
+        // One term: one grid shares nothing, and its own products (the cheaper of stencils and its own FFTs)
+        // cost at most as much. Twelve: the views' transforms, shared, cost less than twelve products.
+        let some = |count: usize| {
+            (0..count)
+                .map(|i| Term {
+                    observer: &r,
+                    objective: obj_t.clone(),
+                    weight: 0.1 * (i + 1) as f64,
+                    leak: None,
+                })
+                .collect::<Vec<_>>()
+        };
+        assert!(MultiplexObjective::new(some(1), d.n_bands(), 3.0, 1e-3)
+            .shared
+            .is_none());
+        assert!(MultiplexObjective::new(some(12), d.n_bands(), 3.0, 1e-3)
+            .shared
+            .is_some());
     }
 
     #[test]

@@ -10,8 +10,8 @@ use crate::physics::display::DisplayGeometry;
 use crate::physics::profile::{ProfileError, VisionProfile};
 use crate::physics::spectral::{coupling, ConeFundamentals};
 use crate::physics::transport::{
-    EyePosition, GatheredField, RetinalGrid, TransportCache, TransportError, TransportMatrix, TransportOptions,
-    WaveSampling,
+    EyePosition, GatheredField, RetinalGrid, StencilOperator, TransportCache, TransportError, TransportMatrix,
+    TransportOptions, WaveSampling,
 };
 use crate::physics::zernike::ZernikeCoefficients;
 
@@ -162,6 +162,15 @@ impl Observer {
             .iter()
             .map(|t| t.stencil().map(|st| st.gather_pad()))
             .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
+    }
+
+    /// Every band's operator as per-view kernels, when each band has its own (wave optics) and all are held
+    /// so; `None` otherwise.
+    pub fn band_stencils(&self) -> Option<Vec<&StencilOperator>> {
+        if !self.per_band() {
+            return None;
+        }
+        self.transports.iter().map(|t| t.stencil()).collect()
     }
 
     /// Which bands' products run by stencils (and read a [`GatheredField`]).

@@ -159,7 +159,16 @@ pub(crate) fn grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) 
 
 /// The small grid (P', Q') of the views' transforms: the padded grid is k times it.
 fn small_grid_size(views: &[ViewStencil], holes: (usize, usize), k: usize) -> (usize, usize) {
-    let nonempty = || views.iter().filter(|v| v.width > 0);
+    small_grid_of(views.iter(), holes, k)
+}
+
+/// [`small_grid_size`] of every view in `views` (several operators' on one grid: the widest extent each way).
+fn small_grid_of<'a>(
+    views: impl Iterator<Item = &'a ViewStencil> + Clone,
+    holes: (usize, usize),
+    k: usize,
+) -> (usize, usize) {
+    let nonempty = || views.clone().filter(|v| v.width > 0);
     let lo_x = nonempty().map(|v| v.x0).min().unwrap_or(0);
     let hi_x = nonempty().map(|v| v.x0 + v.width as i64 - 1).max().unwrap_or(0);
     let lo_y = nonempty().map(|v| v.y0).min().unwrap_or(0);
@@ -237,32 +246,7 @@ impl FftKernels {
             None => &self.weights,
             Some(t) => &self.derivatives[t],
         };
-        cell.get_or_init(|| {
-            let (p, q) = (self.plan.p, self.plan.q);
-            let scale = 1.0 / (p * q) as f32;
-            views
-                .par_iter()
-                .map_init(
-                    || self.plan.scratch(),
-                    |s, st| {
-                        let values = term.map_or(&st.weights, |t| &st.derivatives[t]);
-                        s.img.iter_mut().for_each(|v| *v = 0.0);
-                        for cy in 0..st.height {
-                            let y = (st.y0 + cy as i64).rem_euclid(q as i64) as usize;
-                            for cx in 0..st.width {
-                                let x = (st.x0 + cx as i64).rem_euclid(p as i64) as usize;
-                                s.img[y * p + x] += values[cy * st.width + cx] * scale;
-                            }
-                        }
-                        let mut spec = vec![Complex32::default(); self.plan.h * q];
-                        let mut img = std::mem::take(&mut s.img);
-                        self.plan.forward(&mut img, 0..q, &mut spec, s);
-                        s.img = img;
-                        spec
-                    },
-                )
-                .collect()
-        })
+        cell.get_or_init(|| kernel_spectra(&self.plan, views, term))
     }
 
     /// out[r·3 + a] (+)= c[a]·(T L_band)_r, the light field's view v at `l[(frame index)·n_bands + band]`.
@@ -279,41 +263,153 @@ impl FftKernels {
         out: &mut [f32],
     ) {
         let kernels = self.spectra(views, term);
-        let (plan, small) = (&self.plan, &self.small);
-        let (p, q, k) = (plan.p, plan.q, self.k);
-        let (ps, qs, hs) = (small.p, small.q, small.h);
-        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
-        let frame_w = nx * nu;
-        // The views' samples on their small grids, gathered in one pass over the light field: each frame row
-        // is read whole, where gathering one view at a time would read all of it once per view.
-        let mut images = vec![0f32; nu * nv * ps * qs];
-        images
-            .par_chunks_mut(nu * ps * qs)
-            .enumerate()
-            .for_each(|(j, row_of_views)| {
-                for y in 0..ny {
-                    let frame = &l[(y * nv + j) * frame_w * n_bands..][..frame_w * n_bands];
-                    for i in 0..nu {
-                        let dst = &mut row_of_views[i * ps * qs + y * ps..][..nx];
-                        for (x, d) in dst.iter_mut().enumerate() {
-                            *d = frame[(x * nu + i) * n_bands + band];
-                        }
+        let shape = self.shape();
+        let spectra = view_spectra(&self.small, &shape, l, n_bands, band);
+        let total = spectrum_product(&self.plan, &self.small, [(kernels, spectra.as_slice())].into_iter());
+        write_image(&self.plan, &shape, total, c, accumulate, out);
+    }
+
+    /// The adjoint of [`Self::forward_band`], Σ_a c[a]·(Tᵀ y_a), per view: sample (x, y; view v) at
+    /// `planes[(v·ny + y)·stride + x]` (overwritten; the rest of each row left as it is).
+    pub(crate) fn adjoint_planes(
+        &self,
+        views: &[ViewStencil],
+        term: Option<usize>,
+        y: &[f32],
+        c: [f32; 3],
+        stride: usize,
+        planes: &mut [f32],
+    ) {
+        let kernels = self.spectra(views, term);
+        let shape = self.shape();
+        let y_spec = image_spectrum(&self.plan, &shape, y, c);
+        let (nu, nv, ny) = (shape.views_u, shape.views_v, shape.holes_y);
+        assert_eq!(planes.len(), nu * nv * ny * stride, "planes length");
+        planes.par_chunks_mut(ny * stride).enumerate().for_each_init(
+            || (self.small.scratch(), vec![Complex32::default(); self.small.q]),
+            |(s, folded), (v, plane)| {
+                let spec = fold_correlation(&self.plan, &self.small, [(&kernels[v], &y_spec)].into_iter(), s, folded);
+                view_plane(&self.small, &shape, spec, s, plane, stride);
+            },
+        );
+    }
+
+    fn shape(&self) -> Shape {
+        Shape {
+            holes_x: self.holes_x,
+            holes_y: self.holes_y,
+            views_u: self.views_u,
+            views_v: self.views_v,
+            k: self.k,
+        }
+    }
+}
+
+/// A display's counts as the products see them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Shape {
+    pub(crate) holes_x: usize,
+    pub(crate) holes_y: usize,
+    pub(crate) views_u: usize,
+    pub(crate) views_v: usize,
+    /// Retinal pixels per hole.
+    pub(crate) k: usize,
+}
+
+/// K̂_v / (P·Q) per view of `views` (or of their derivative `term`) on `plan`'s grid.
+fn kernel_spectra(plan: &FftPlan, views: &[ViewStencil], term: Option<usize>) -> Vec<Vec<Complex32>> {
+    let (p, q) = (plan.p, plan.q);
+    let scale = 1.0 / (p * q) as f32;
+    views
+        .par_iter()
+        .map_init(
+            || plan.scratch(),
+            |s, st| {
+                let values = term.map_or(&st.weights, |t| &st.derivatives[t]);
+                s.img.iter_mut().for_each(|v| *v = 0.0);
+                for cy in 0..st.height {
+                    let y = (st.y0 + cy as i64).rem_euclid(q as i64) as usize;
+                    for cx in 0..st.width {
+                        let x = (st.x0 + cx as i64).rem_euclid(p as i64) as usize;
+                        s.img[y * p + x] += values[cy * st.width + cx] * scale;
                     }
                 }
-            });
-        let mut spectra = vec![Complex32::default(); nu * nv * hs * qs];
-        spectra
-            .par_chunks_mut(hs * qs)
-            .zip(images.par_chunks_mut(ps * qs))
-            .for_each_init(|| small.scratch(), |s, (spec, img)| small.forward(img, 0..ny, spec, s));
-        // Σ_v K̂_v · FFT(L_v↑), one column of frequencies at a time, where FFT(L_v↑)[fx, fy] =
-        // FFT'(L_v)[fx mod P', fy mod Q'] and the columns past P'/2 follow from the spectrum's symmetry,
-        // X[a, b] = conj(X[P' − a, −b]).
-        let mut total = vec![Complex32::default(); plan.h * q];
-        total.par_chunks_mut(q).enumerate().for_each_init(
-            || vec![Complex32::default(); qs],
-            |mirrored, (fx, acc)| {
-                let a = fx % ps;
+                let mut spec = vec![Complex32::default(); plan.h * q];
+                let mut img = std::mem::take(&mut s.img);
+                plan.forward(&mut img, 0..q, &mut spec, s);
+                s.img = img;
+                spec
+            },
+        )
+        .collect()
+}
+
+/// FFT'(L_v) of every view v of one band of the light field `l` on the small grid, view after view
+/// (`[v·h'·Q' ..]`).
+fn view_spectra(small: &FftPlan, shape: &Shape, l: &[f32], n_bands: usize, band: usize) -> Vec<Complex32> {
+    let (mut images, mut spectra) = (Vec::new(), Vec::new());
+    view_spectra_into(small, shape, l, n_bands, band, &mut images, &mut spectra);
+    spectra
+}
+
+/// [`view_spectra`] into `spectra`, with `images` as the views' padded images (both sized here and kept for
+/// the next call).
+fn view_spectra_into(
+    small: &FftPlan,
+    shape: &Shape,
+    l: &[f32],
+    n_bands: usize,
+    band: usize,
+    images: &mut Vec<f32>,
+    spectra: &mut Vec<Complex32>,
+) {
+    let (ps, qs, hs) = (small.p, small.q, small.h);
+    let (nx, ny, nu, nv) = (shape.holes_x, shape.holes_y, shape.views_u, shape.views_v);
+    let frame_w = nx * nu;
+    // Rows past the display's stay zero (the transforms read only rows below ny); the rows below it are
+    // written whole here, since a transform leaves its input rows as scratch.
+    images.resize(nu * nv * ps * qs, 0.0);
+    spectra.resize(nu * nv * hs * qs, Complex32::default());
+    // The views' samples on their small grids, gathered in one pass over the light field: each frame row
+    // is read whole, where gathering one view at a time would read all of it once per view.
+    images
+        .par_chunks_mut(nu * ps * qs)
+        .enumerate()
+        .for_each(|(j, row_of_views)| {
+            for y in 0..ny {
+                let frame = &l[(y * nv + j) * frame_w * n_bands..][..frame_w * n_bands];
+                for i in 0..nu {
+                    let row = &mut row_of_views[i * ps * qs + y * ps..][..ps];
+                    let (dst, tail) = row.split_at_mut(nx);
+                    for (x, d) in dst.iter_mut().enumerate() {
+                        *d = frame[(x * nu + i) * n_bands + band];
+                    }
+                    tail.fill(0.0);
+                }
+            }
+        });
+    spectra
+        .par_chunks_mut(hs * qs)
+        .zip(images.par_chunks_mut(ps * qs))
+        .for_each_init(|| small.scratch(), |s, (spec, img)| small.forward(img, 0..ny, spec, s));
+}
+
+/// Σ Σ_v K̂_v · FFT(L_v↑) over the (kernels, view spectra) pairs given (each pair's kernels per view, its views'
+/// [`view_spectra`]), one column of frequencies at a time, where FFT(L_v↑)[fx, fy] = FFT'(L_v)[fx mod P',
+/// fy mod Q'] and the columns past P'/2 follow from the spectrum's symmetry, X[a, b] = conj(X[P' − a, −b]).
+fn spectrum_product<'a>(
+    plan: &FftPlan,
+    small: &FftPlan,
+    pairs: impl Iterator<Item = (&'a [Vec<Complex32>], &'a [Complex32])> + Clone + Send + Sync,
+) -> Vec<Complex32> {
+    let (ps, qs, hs) = (small.p, small.q, small.h);
+    let q = plan.q;
+    let mut total = vec![Complex32::default(); plan.h * q];
+    total.par_chunks_mut(q).enumerate().for_each_init(
+        || vec![Complex32::default(); qs],
+        |mirrored, (fx, acc)| {
+            let a = fx % ps;
+            for (kernels, spectra) in pairs.clone() {
                 for (v, kernel) in kernels.iter().enumerate() {
                     let spec = &spectra[v * hs * qs..(v + 1) * hs * qs];
                     let column: &[Complex32] = if a < hs {
@@ -332,89 +428,320 @@ impl FftKernels {
                         }
                     }
                 }
-            },
-        );
-        let mut s = plan.scratch();
-        let mut img = vec![0f32; p * q];
-        let (w, h) = (nx * k, ny * k);
-        plan.inverse(&mut total, 0..h, &mut img, &mut s);
-        out.par_chunks_mut(w * 3).enumerate().for_each(|(gy, row)| {
-            for (gx, o) in row.chunks_exact_mut(3).enumerate() {
-                let value = img[gy * p + gx];
-                for (slot, ca) in o.iter_mut().zip(c) {
-                    *slot = if accumulate { *slot + ca * value } else { ca * value };
-                }
             }
-        });
-    }
+        },
+    );
+    total
+}
 
-    /// The adjoint of [`Self::forward_band`], Σ_a c[a]·(Tᵀ y_a), per view: sample (x, y; view v) at
-    /// `planes[(v·ny + y)·stride + x]` (overwritten; the rest of each row left as it is).
-    pub(crate) fn adjoint_planes(
-        &self,
-        views: &[ViewStencil],
-        term: Option<usize>,
-        y: &[f32],
-        c: [f32; 3],
-        stride: usize,
-        planes: &mut [f32],
-    ) {
-        let kernels = self.spectra(views, term);
-        let plan = &self.plan;
-        let (p, q, k) = (plan.p, plan.q, self.k);
-        let (nx, ny, nu, nv) = (self.holes_x, self.holes_y, self.views_u, self.views_v);
-        let (w, h) = (nx * k, ny * k);
-        // Ŷ of the coupled image ỹ = Σ_a c_a y_a, zero-padded.
-        let mut s = plan.scratch();
-        let mut img = vec![0f32; p * q];
-        for gy in 0..h {
-            for gx in 0..w {
-                let px = &y[(gy * w + gx) * 3..(gy * w + gx) * 3 + 3];
-                img[gy * p + gx] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+/// out[r·3 + a] (+)= c[a]·(the retinal image of the spectrum `total`, cropped to the display's grid).
+fn write_image(
+    plan: &FftPlan,
+    shape: &Shape,
+    mut total: Vec<Complex32>,
+    c: [f32; 3],
+    accumulate: bool,
+    out: &mut [f32],
+) {
+    let mut s = plan.scratch();
+    let mut img = vec![0f32; plan.p * plan.q];
+    let (w, h) = (shape.holes_x * shape.k, shape.holes_y * shape.k);
+    let p = plan.p;
+    plan.inverse(&mut total, 0..h, &mut img, &mut s);
+    out.par_chunks_mut(w * 3).enumerate().for_each(|(gy, row)| {
+        for (gx, o) in row.chunks_exact_mut(3).enumerate() {
+            let value = img[gy * p + gx];
+            for (slot, ca) in o.iter_mut().zip(c) {
+                *slot = if accumulate { *slot + ca * value } else { ca * value };
             }
         }
-        let mut y_spec = vec![Complex32::default(); plan.h * q];
-        plan.forward(&mut img, 0..h, &mut y_spec, &mut s);
-        // Per view: the correlation, sampled at the holes: its spectrum folded onto the small grid and
-        // transformed there. Column fx of the full spectrum folds onto fx mod P' and, as the conjugate of
-        // column P − fx (the spectrum of a real image), onto (P − fx) mod P'.
-        let (ps, qs, hs) = (self.small.p, self.small.q, self.small.h);
-        assert_eq!(planes.len(), nu * nv * ny * stride, "planes length");
-        planes.par_chunks_mut(ny * stride).enumerate().for_each_init(
-            || (self.small.scratch(), vec![Complex32::default(); qs]),
-            |(s, folded), (v, plane)| {
-                let mut spec = std::mem::take(&mut s.spec);
-                spec.iter_mut().for_each(|z| *z = Complex32::default());
-                for fx in 0..plan.h {
-                    folded.iter_mut().for_each(|z| *z = Complex32::default());
-                    let at = fx * q..(fx + 1) * q;
-                    for (y_run, k_run) in y_spec[at.clone()].chunks_exact(qs).zip(kernels[v][at].chunks_exact(qs)) {
-                        for ((f, yz), kz) in folded.iter_mut().zip(y_run).zip(k_run) {
-                            *f += yz * kz.conj();
-                        }
-                    }
-                    let a = fx % ps;
-                    if a < hs {
-                        for (z, f) in spec[a * qs..(a + 1) * qs].iter_mut().zip(folded.iter()) {
-                            *z += f;
-                        }
-                    }
-                    let mirror = (p - fx) % ps;
-                    if fx != 0 && 2 * fx != p && mirror < hs {
-                        for (b, z) in spec[mirror * qs..(mirror + 1) * qs].iter_mut().enumerate() {
-                            *z += conj_negated(folded, b);
-                        }
-                    }
+    });
+}
+
+/// Ŷ of the coupled image ỹ = Σ_a c_a y_a, zero-padded onto `plan`'s grid.
+fn image_spectrum(plan: &FftPlan, shape: &Shape, y: &[f32], c: [f32; 3]) -> Vec<Complex32> {
+    let (p, q) = (plan.p, plan.q);
+    let (w, h) = (shape.holes_x * shape.k, shape.holes_y * shape.k);
+    let mut s = plan.scratch();
+    let mut img = vec![0f32; p * q];
+    for gy in 0..h {
+        for gx in 0..w {
+            let px = &y[(gy * w + gx) * 3..(gy * w + gx) * 3 + 3];
+            img[gy * p + gx] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
+        }
+    }
+    let mut y_spec = vec![Complex32::default(); plan.h * q];
+    plan.forward(&mut img, 0..h, &mut y_spec, &mut s);
+    y_spec
+}
+
+/// One view's correlation Σ conj(K̂_v)·Ŷ over the (kernel, image spectrum) pairs given, folded onto the small
+/// grid (its spectrum there, in `s.spec`'s buffer, returned): sampling the correlation at the holes. Column fx
+/// of the full spectrum folds onto fx mod P' and, as the conjugate of column P − fx (the spectrum of a real
+/// image), onto (P − fx) mod P'.
+fn fold_correlation<'a>(
+    plan: &FftPlan,
+    small: &FftPlan,
+    pairs: impl Iterator<Item = (&'a Vec<Complex32>, &'a Vec<Complex32>)> + Clone,
+    s: &mut Scratch,
+    folded: &mut [Complex32],
+) -> Vec<Complex32> {
+    let (p, q) = (plan.p, plan.q);
+    let (ps, qs, hs) = (small.p, small.q, small.h);
+    let mut spec = std::mem::take(&mut s.spec);
+    spec.iter_mut().for_each(|z| *z = Complex32::default());
+    for fx in 0..plan.h {
+        folded.iter_mut().for_each(|z| *z = Complex32::default());
+        let at = fx * q..(fx + 1) * q;
+        for (kernel, y_spec) in pairs.clone() {
+            for (y_run, k_run) in y_spec[at.clone()]
+                .chunks_exact(qs)
+                .zip(kernel[at.clone()].chunks_exact(qs))
+            {
+                for ((f, yz), kz) in folded.iter_mut().zip(y_run).zip(k_run) {
+                    *f += yz * kz.conj();
                 }
-                let mut img = std::mem::take(&mut s.img);
-                self.small.inverse(&mut spec, 0..ny, &mut img, s);
-                for (r, row) in plane.chunks_exact_mut(stride).enumerate() {
-                    row[..nx].copy_from_slice(&img[r * ps..r * ps + nx]);
+            }
+        }
+        let a = fx % ps;
+        if a < hs {
+            for (z, f) in spec[a * qs..(a + 1) * qs].iter_mut().zip(folded.iter()) {
+                *z += f;
+            }
+        }
+        let mirror = (p - fx) % ps;
+        if fx != 0 && 2 * fx != p && mirror < hs {
+            for (b, z) in spec[mirror * qs..(mirror + 1) * qs].iter_mut().enumerate() {
+                *z += conj_negated(folded, b);
+            }
+        }
+    }
+    spec
+}
+
+/// The view's samples of a folded spectrum (consumed, its buffer returned to `s`): `plane[y·stride + x]` for
+/// the display's holes (the rest of each row left as it is).
+fn view_plane(
+    small: &FftPlan,
+    shape: &Shape,
+    mut spec: Vec<Complex32>,
+    s: &mut Scratch,
+    plane: &mut [f32],
+    stride: usize,
+) {
+    let (ps, nx) = (small.p, shape.holes_x);
+    let mut img = std::mem::take(&mut s.img);
+    small.inverse(&mut spec, 0..shape.holes_y, &mut img, s);
+    for (r, row) in plane.chunks_exact_mut(stride).enumerate().take(shape.holes_y) {
+        row[..nx].copy_from_slice(&img[r * ps..r * ps + nx]);
+    }
+    s.img = img;
+    s.spec = spec;
+}
+
+/// Several observers' kernels of every band as spectra on one padded grid per band (docs/design.md §2.7,
+/// "Shared transforms"): a product for all of them transforms the light field's views once (forward) and the
+/// views of their adjoints' sum once (adjoint), where each observer's own FFT products ([`FftKernels`])
+/// transform them once an observer. What is left per observer and band is the spectrum product and one
+/// transform of the retinal image each way. The adjoint of a sum is the sum of the adjoints, and sampling
+/// at the holes is linear, so the observers' correlations are added on the full grid and folded and
+/// transformed once.
+pub(crate) struct SharedSpectra {
+    shape: Shape,
+    /// Per band.
+    bands: Vec<BandSpectra>,
+    n_observers: usize,
+}
+
+/// One band's grid and every observer's kernels on it.
+struct BandSpectra {
+    plan: FftPlan,
+    small: FftPlan,
+    /// Per observer, per view: K̂_v / (P·Q).
+    kernels: Vec<Vec<Vec<Complex32>>>,
+}
+
+/// The light field's views transformed once for every observer ([`SharedSpectra::transform`]): per band,
+/// [`view_spectra`]; with the buffers of the adjoint's sum, all kept from one product to the next.
+#[derive(Default)]
+pub(crate) struct ViewSpectra {
+    spectra: Vec<Vec<Complex32>>,
+    images: Vec<Vec<f32>>,
+    planes: Vec<f32>,
+}
+
+/// One observer's adjoint input transformed ([`SharedSpectra::image_spectra`]): per band, Ŷ of Σ_a c_a y_a.
+pub(crate) struct ImageSpectra(Vec<Vec<Complex32>>);
+
+impl SharedSpectra {
+    /// `views[o][n]`: observer o's kernels of band n (every observer on one display of `shape`).
+    pub(crate) fn new(shape: Shape, views: &[Vec<&[ViewStencil]>]) -> Self {
+        let n_bands = views.first().map_or(0, |o| o.len());
+        assert!(
+            views.iter().all(|o| o.len() == n_bands),
+            "every observer has every band"
+        );
+        let holes = (shape.holes_x, shape.holes_y);
+        let bands = (0..n_bands)
+            .map(|n| {
+                let all = views.iter().flat_map(|o| o[n].iter());
+                let (p, q) = small_grid_of(all, holes, shape.k);
+                let plan = FftPlan::new(p * shape.k, q * shape.k);
+                let kernels = views.iter().map(|o| kernel_spectra(&plan, o[n], None)).collect();
+                BandSpectra {
+                    plan,
+                    small: FftPlan::new(p, q),
+                    kernels,
                 }
-                s.img = img;
-                s.spec = spec;
+            })
+            .collect();
+        Self {
+            shape,
+            bands,
+            n_observers: views.len(),
+        }
+    }
+
+    /// Whether products through one grid per band are expected to cost less than each operator's own (the
+    /// flops of [`fft_is_cheaper`]'s model, per direction): the views' transforms once, and per observer the
+    /// spectrum product and one transform on the shared grid, against each operator's stencils (`taps`) or
+    /// its own FFTs (on its own grid `own_grid`), whichever it runs.
+    pub(crate) fn pays(shape: Shape, views: &[Vec<&[ViewStencil]>], own: &[Vec<OwnCost>]) -> bool {
+        let n_views = (shape.views_u * shape.views_v) as f64;
+        let k = shape.k;
+        let holes = (shape.holes_x, shape.holes_y);
+        let n_bands = views.first().map_or(0, |o| o.len());
+        let mut shared = 0.0;
+        for n in 0..n_bands {
+            let (p, q) = small_grid_of(views.iter().flat_map(|o| o[n].iter()), holes, k);
+            let small = (p * q) as f64;
+            let full = small * (k * k) as f64;
+            shared += FFT_FLOP_COST * n_views * 2.5 * small * small.log2();
+            shared += FFT_FLOP_COST * views.len() as f64 * (2.5 * full * full.log2() + 4.0 * full * n_views);
+        }
+        let separate: f64 = own.iter().flatten().map(|c| c.flops()).sum();
+        shared < separate
+    }
+
+    /// Every band's views of `l` (`l[p·N + n]`, N bands) transformed, into `views` (its buffers reused).
+    pub(crate) fn transform(&self, l: &[f32], views: &mut ViewSpectra) {
+        let n_bands = self.bands.len();
+        views.spectra.resize_with(n_bands, Vec::new);
+        views.images.resize_with(n_bands, Vec::new);
+        for (n, b) in self.bands.iter().enumerate() {
+            view_spectra_into(
+                &b.small,
+                &self.shape,
+                l,
+                n_bands,
+                n,
+                &mut views.images[n],
+                &mut views.spectra[n],
+            );
+        }
+    }
+
+    /// Observer o's S = Σ_n c_n ⊗ T_n L_n (`out[r·3 + a]`, overwritten) from the light field's `views`.
+    pub(crate) fn forward(&self, o: usize, views: &ViewSpectra, coupling: &[[f32; 3]], out: &mut [f32]) {
+        for (n, (b, c)) in self.bands.iter().zip(coupling).enumerate() {
+            let pairs = [(b.kernels[o].as_slice(), views.spectra[n].as_slice())].into_iter();
+            let total = spectrum_product(&b.plan, &b.small, pairs);
+            write_image(&b.plan, &self.shape, total, *c, n > 0, out);
+        }
+    }
+
+    /// The transforms of Σ_a c_na y_a per band n: an observer's adjoint input `y[r·3 + a]` for
+    /// [`Self::adjoint`].
+    pub(crate) fn image_spectra(&self, y: &[f32], coupling: &[[f32; 3]]) -> ImageSpectra {
+        ImageSpectra(
+            self.bands
+                .iter()
+                .zip(coupling)
+                .map(|(b, c)| image_spectrum(&b.plan, &self.shape, y, *c))
+                .collect(),
+        )
+    }
+
+    /// `out[p·N + n]` = 2μ·x + c·Σ_o (observer o's Σ_a c_na (T_nᵀ y_oa))_p, from every observer's
+    /// [`Self::image_spectra`] (`images[o]`, in the observers' order); `buffers` holds the per-view sums (the
+    /// [`ViewSpectra`] of the same product serves).
+    pub(crate) fn adjoint(
+        &self,
+        images: &[&ImageSpectra],
+        x: &[f32],
+        mu: f32,
+        c: f32,
+        buffers: &mut ViewSpectra,
+        out: &mut [f32],
+    ) {
+        assert_eq!(images.len(), self.n_observers, "one image per observer");
+        let Shape {
+            holes_x: nx,
+            holes_y: ny,
+            views_u: nu,
+            views_v: nv,
+            ..
+        } = self.shape;
+        let n_bands = self.bands.len();
+        let n_views = nu * nv;
+        assert_eq!(x.len(), nx * ny * n_views * n_bands, "light field length");
+        assert_eq!(out.len(), x.len(), "gradient length");
+        // Per band and view, the sum of the observers' correlations folded and transformed once.
+        let planes = &mut buffers.planes;
+        planes.resize(n_bands * n_views * ny * nx, 0.0);
+        planes.par_chunks_mut(ny * nx).enumerate().for_each_init(
+            || None,
+            |slot: &mut Option<(usize, Scratch, Vec<Complex32>)>, (at, plane)| {
+                let (n, v) = (at / n_views, at % n_views);
+                let b = &self.bands[n];
+                if slot.as_ref().is_none_or(|s| s.0 != n) {
+                    *slot = Some((n, b.small.scratch(), vec![Complex32::default(); b.small.q]));
+                }
+                let (_, s, folded) = slot.as_mut().expect("set above");
+                let pairs = b.kernels.iter().zip(images).map(|(k, y)| (&k[v], &y.0[n]));
+                let spec = fold_correlation(&b.plan, &b.small, pairs, s, folded);
+                view_plane(&b.small, &self.shape, spec, s, plane, nx);
             },
         );
+        let frame_w = nx * nu;
+        out.par_chunks_mut(frame_w * n_bands)
+            .zip(x.par_chunks(frame_w * n_bands))
+            .enumerate()
+            .for_each(|(row, (dst, x))| {
+                let (yy, j) = (row / nv, row % nv);
+                for i in 0..nu {
+                    for n in 0..n_bands {
+                        let from = ((n * n_views + j * nu + i) * ny + yy) * nx;
+                        for (xx, g) in planes[from..from + nx].iter().enumerate() {
+                            let at = (xx * nu + i) * n_bands + n;
+                            dst[at] = 2.0 * mu * x[at] + c * g;
+                        }
+                    }
+                }
+            });
+    }
+}
+
+/// What one operator's own products cost, for [`SharedSpectra::pays`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum OwnCost {
+    /// By stencils: their multiply-adds.
+    Stencil { taps: usize },
+    /// By its own FFTs on a P×Q grid.
+    Fft {
+        n_views: usize,
+        p: usize,
+        q: usize,
+        k: usize,
+    },
+}
+
+impl OwnCost {
+    fn flops(self) -> f64 {
+        match self {
+            OwnCost::Stencil { taps } => 2.0 * taps as f64,
+            OwnCost::Fft { n_views, p, q, k } => FFT_FLOP_COST * fft_flops(n_views, p, q, k),
+        }
     }
 }
 
@@ -433,10 +760,16 @@ fn conj_negated(column: &[Complex32], b: usize) -> Complex32 {
 /// alone, but the `secure` job then solved in 4.2 s against 4.3–4.9 s by stencils, held twice the memory
 /// (1.9 GB: the spectra of 7 observers × 4 bands) and evaluated cached people in 5.5 s against 2.4 s.
 pub(crate) fn fft_is_cheaper(taps: usize, n_views: usize, p: usize, q: usize, k: usize) -> bool {
-    const FFT_FLOP_COST: f64 = 3.0;
+    FFT_FLOP_COST * fft_flops(n_views, p, q, k) < 2.0 * taps as f64
+}
+
+/// How much an FFT product's flop weighs against a stencil's multiply-add ([`fft_is_cheaper`]).
+const FFT_FLOP_COST: f64 = 3.0;
+
+/// The flops of one FFT product (either direction) on the P×Q grid: a real 2D FFT takes about 2.5·N·log2(N)
+/// flops, the spectrum product 8 flops per held frequency (N/2).
+fn fft_flops(n_views: usize, p: usize, q: usize, k: usize) -> f64 {
     let n = (p * q) as f64;
     let small = n / (k * k) as f64;
-    // A real 2D FFT: about 2.5·N·log2(N) flops; the spectrum product 8 flops per held frequency (N/2).
-    let fft = n_views as f64 * (2.5 * small * small.log2() + 4.0 * n) + 2.5 * n * n.log2();
-    FFT_FLOP_COST * fft < 2.0 * taps as f64
+    n_views as f64 * (2.5 * small * small.log2() + 4.0 * n) + 2.5 * n * n.log2()
 }

@@ -33,10 +33,12 @@ pub use cache::{TransportCache, DEFAULT_CAPACITY_BYTES};
 /// gigabytes, which no job should claim.
 pub const MAX_WAVE_OPERATOR_BYTES: usize = 256 << 20;
 pub use csr::CsrMatrix;
+pub(crate) use fft::{ImageSpectra, SharedSpectra, ViewSpectra};
 pub use grid::{
     EyePosition, RetinalGrid, SubRaySequence, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND,
 };
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
+pub(crate) use stencil::shared_spectra;
 pub use stencil::{multiply_add_peak_gflops, vector_isa, GatheredField, ProductMethod, StencilOperator};
 pub use trace::block_seen;
 

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::fft::{fft_is_cheaper, grid_size, FftKernels};
+use super::fft::{fft_is_cheaper, grid_size, FftKernels, OwnCost, Shape, SharedSpectra};
 use crate::physics::display::DisplayGeometry;
 
 /// One view's kernel: a dense box of weights (and of ∂/∂W_j per term) over retinal offsets
@@ -542,6 +542,33 @@ impl StencilOperator {
         )
     }
 
+    /// The display's counts as the products see them.
+    fn shape(&self) -> Shape {
+        Shape {
+            holes_x: self.holes_x,
+            holes_y: self.holes_y,
+            views_u: self.views_u,
+            views_v: self.views_v,
+            k: self.k,
+        }
+    }
+
+    /// What this operator's own products cost, by the method they run.
+    fn own_cost(&self) -> OwnCost {
+        match self.method() {
+            ProductMethod::Stencil => OwnCost::Stencil { taps: self.nnz() },
+            ProductMethod::Fft => {
+                let (p, q) = grid_size(&self.views, (self.holes_x, self.holes_y), self.k);
+                OwnCost::Fft {
+                    n_views: self.n_views(),
+                    p,
+                    q,
+                    k: self.k,
+                }
+            }
+        }
+    }
+
     /// How the products are computed.
     pub fn method(&self) -> ProductMethod {
         if self.fft.0.is_some() {
@@ -926,6 +953,32 @@ impl StencilOperator {
     }
 }
 
+/// Several observers' operators (`ops[o][n]`: observer o's of band n) with their kernels as spectra on one
+/// grid per band ([`SharedSpectra`]), when they share a display and, with `only_if_cheaper`, when that is
+/// expected to cost less than each operator's own products; `None` otherwise.
+pub(crate) fn shared_spectra(ops: &[Vec<&StencilOperator>], only_if_cheaper: bool) -> Option<SharedSpectra> {
+    let first = ops.first()?.first()?;
+    let shape = first.shape();
+    let n_bands = ops[0].len();
+    if ops
+        .iter()
+        .any(|o| o.len() != n_bands || o.iter().any(|op| op.shape() != shape))
+    {
+        return None;
+    }
+    let views: Vec<Vec<&[ViewStencil]>> = ops
+        .iter()
+        .map(|o| o.iter().map(|op| op.views.as_slice()).collect())
+        .collect();
+    if only_if_cheaper {
+        let own: Vec<Vec<OwnCost>> = ops.iter().map(|o| o.iter().map(|op| op.own_cost()).collect()).collect();
+        if !SharedSpectra::pays(shape, &views, &own) {
+            return None;
+        }
+    }
+    Some(SharedSpectra::new(shape, &views))
+}
+
 /// Bands of a light field laid out as the stencils' forward products read them ([`StencilOperator::gather`]):
 /// per band, one row per (view, y) of `row_len` floats with the holes at [pad, pad + nx) and zeros around them.
 pub struct GatheredField {
@@ -979,6 +1032,7 @@ fn scatter_views(
 mod tests {
     use super::*;
     use crate::physics::transport::rng::SplitMix64;
+    use crate::physics::transport::{ImageSpectra, ViewSpectra};
 
     /// Small displays with 3×2 views (geometry otherwise the paper's; only the counts matter): 5×4 holes (rows
     /// shorter than one register block) and 70×3 (rows of two blocks, the second part-filled).
@@ -1165,5 +1219,79 @@ mod tests {
             ops[0].combine_planes(&l, mu, scale, &refs, n_bands, &mut combined);
             assert_eq!(combined, field_sum, "k {k}: combined adjoints");
         }
+    }
+
+    /// Several operators' kernels on one grid per band (`SharedSpectra`) against T written out: every
+    /// observer's forward product from the views transformed once, and the sum of their adjoints (plus 2μ·x)
+    /// folded and transformed once; operators on different displays are refused.
+    #[test]
+    fn shared_grids_give_every_observer_s_product_and_the_sum_of_adjoints() {
+        let n_bands = 2;
+        let cs = [
+            [[0.7f32, -0.2, 0.4], [0.1, 0.5, 0.3]],
+            [[0.2, 0.2, -0.6], [0.9, 0.1, 0.0]],
+            [[-0.3, 0.8, 0.2], [0.4, 0.4, 0.4]],
+        ];
+        let (mu, scale) = (0.013f32, 0.77f32);
+        for (d, k) in displays()
+            .into_iter()
+            .flat_map(|d| (1..=3).map(move |k| (d.clone(), k)))
+        {
+            let ops: Vec<Vec<StencilOperator>> = (0..3u64)
+                .map(|o| {
+                    (0..n_bands as u64)
+                        .map(|n| operator(&d, k, 100 + 10 * o + n + k as u64))
+                        .collect()
+                })
+                .collect();
+            let refs: Vec<Vec<&StencilOperator>> = ops.iter().map(|o| o.iter().collect()).collect();
+            let shared = shared_spectra(&refs, false).expect("one display");
+            let (samples, pixels) = (ops[0][0].n_samples(), ops[0][0].n_pixels());
+            let l = random(samples * n_bands, 3);
+            let mut views = ViewSpectra::default();
+            shared.transform(&l, &mut views);
+            let mut want_grad: Vec<f64> = l.iter().map(|x| 2.0 * mu as f64 * *x as f64).collect();
+            let mut images = Vec::new();
+            for (o, band_ops) in ops.iter().enumerate() {
+                let t: Vec<Vec<Vec<f64>>> = band_ops.iter().map(|op| dense(op, &d, None)).collect();
+                let mut out = random(pixels * 3, 9);
+                shared.forward(o, &views, &cs[o], &mut out);
+                for r in 0..pixels {
+                    for a in 0..3 {
+                        let want: f64 = (0..n_bands)
+                            .map(|n| {
+                                let s: f64 = (0..samples).map(|p| t[n][r][p] * l[p * n_bands + n] as f64).sum();
+                                cs[o][n][a] as f64 * s
+                            })
+                            .sum();
+                        let got = out[r * 3 + a] as f64;
+                        assert!(
+                            (got - want).abs() < 1e-4 * (1.0 + want.abs()),
+                            "k {k} o {o} r {r}: {got} against {want}"
+                        );
+                    }
+                }
+                let y = random(pixels * 3, 20 + o as u64);
+                images.push(shared.image_spectra(&y, &cs[o]));
+                for (p, n) in (0..samples).flat_map(|p| (0..n_bands).map(move |n| (p, n))) {
+                    let back: f64 = (0..pixels)
+                        .map(|r| t[n][r][p] * (0..3).map(|a| cs[o][n][a] as f64 * y[r * 3 + a] as f64).sum::<f64>())
+                        .sum();
+                    want_grad[p * n_bands + n] += scale as f64 * back;
+                }
+            }
+            let refs: Vec<&ImageSpectra> = images.iter().collect();
+            let mut grad = random(l.len(), 7);
+            shared.adjoint(&refs, &l, mu, scale, &mut views, &mut grad);
+            for (p, (got, want)) in grad.iter().zip(&want_grad).enumerate() {
+                assert!(
+                    (*got as f64 - want).abs() < 1e-4 * (1.0 + want.abs()),
+                    "k {k} adjoint {p}: {got} against {want}"
+                );
+            }
+        }
+        let [a, b, _] = displays();
+        let (oa, ob) = (operator(&a, 1, 1), operator(&b, 1, 2));
+        assert!(shared_spectra(&[vec![&oa], vec![&ob]], false).is_none());
     }
 }
