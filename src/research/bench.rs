@@ -717,8 +717,9 @@ pub fn shared_transforms_rows(display: &DisplayGeometry, sub_rays: u32, ks: &[us
     let mut out = String::new();
     for &k in ks {
         let problem = BenchProblem::with_optics(display, k, sub_rays, Optics::Wave)?;
+        let picked = problem.objective().shares_transforms();
         let start = Instant::now();
-        let shared = problem.objective();
+        let shared = problem.objective().with_shared_transforms();
         let setup = start.elapsed().as_secs_f64();
         let separate = problem.objective().without_shared_transforms();
         let x: Vec<f32> = (0..shared.dim())
@@ -748,7 +749,7 @@ pub fn shared_transforms_rows(display: &DisplayGeometry, sub_rays: u32, ks: &[us
         writeln!(
             out,
             "| {label}, {k} observers | {} | {} ms | {} ms | {:.2}× | {:.0} ms |",
-            if shared.shares_transforms() { "shared" } else { "own" },
+            if picked { "shared" } else { "own" },
             range(&a),
             range(&b),
             best(&b) / best(&a),

@@ -320,9 +320,13 @@ impl MultiplexObjective<'_> {
         self
     }
 
-    /// The same objective with its terms' kernels on shared grids whether or not that is expected to pay.
-    #[cfg(test)]
-    fn with_sharing(mut self) -> Self {
+    /// The same objective with its terms' kernels on shared grids whether or not that is expected to pay
+    /// (every term's operators must be per-view kernels on one display).
+    ///
+    /// # Panics
+    ///
+    /// If some term's operators are not per-view kernels of every band, or the terms' displays differ.
+    pub fn with_shared_transforms(mut self) -> Self {
         let ops: Vec<Vec<&StencilOperator>> = self
             .terms
             .iter()
@@ -740,7 +744,7 @@ mod tests {
         let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
         let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
         let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
-        let (shared, plain) = (mk().with_sharing(), mk().without_gathering());
+        let (shared, plain) = (mk().with_shared_transforms(), mk().without_gathering());
         let run = |o: &MultiplexObjective| {
             let (mut grad, mut hv) = (vec![0f32; n], vec![0f32; n]);
             let f = o.value_and_gradient(&x, &mut grad);
