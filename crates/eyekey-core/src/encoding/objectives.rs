@@ -92,6 +92,26 @@ struct Gather {
     bands: Vec<usize>,
 }
 
+impl Gather {
+    /// What `terms` need gathered, if every one's operators are per-view kernels and some band's products run
+    /// by stencils: only the bands some term's stencils read (FFT products read the light field as it is).
+    fn of(terms: &[Term<'_>], n_bands: usize) -> Option<Self> {
+        let mut by_stencils = vec![false; n_bands];
+        for t in terms {
+            for (any, own) in by_stencils.iter_mut().zip(t.observer.stencil_bands()) {
+                *any |= own;
+            }
+        }
+        let bands: Vec<usize> = (0..n_bands).filter(|&n| by_stencils[n]).collect();
+        terms
+            .iter()
+            .map(|t| t.observer.gather_pad())
+            .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
+            .filter(|_| !bands.is_empty())
+            .map(|pad| Gather { pad, bands })
+    }
+}
+
 /// Eq. 14, generalised to K observers, plus an optional Tikhonov term μ‖L‖²/P over the P unknowns.
 pub struct MultiplexObjective<'a> {
     terms: Vec<Term<'a>>,
@@ -117,21 +137,7 @@ impl<'a> MultiplexObjective<'a> {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
-        // Only the bands some term's stencils read are gathered (FFT products read the light field as it is),
-        // and nothing where no product runs by stencils.
-        let mut by_stencils = vec![false; n_bands];
-        for t in &terms {
-            for (any, own) in by_stencils.iter_mut().zip(t.observer.stencil_bands()) {
-                *any |= own;
-            }
-        }
-        let bands: Vec<usize> = (0..n_bands).filter(|&n| by_stencils[n]).collect();
-        let gather = terms
-            .iter()
-            .map(|t| t.observer.gather_pad())
-            .try_fold(0, |pad, p| p.map(|p| pad.max(p)))
-            .filter(|_| !bands.is_empty())
-            .map(|pad| Gather { pad, bands });
+        let gather = Gather::of(&terms, n_bands);
         let stencils: Option<Vec<Vec<&StencilOperator>>> = terms.iter().map(|t| t.observer.band_stencils()).collect();
         let shared = stencils.and_then(|ops| shared_spectra(&ops, true));
         let gather = gather.filter(|_| shared.is_none());
@@ -308,13 +314,7 @@ impl MultiplexObjective<'_> {
     /// stencils, each term's products on its own operators (what shared grids are measured against).
     pub fn without_shared_transforms(mut self) -> Self {
         if self.shared.take().is_some() {
-            let stencil_bands = |t: &Term<'_>| t.observer.stencil_bands();
-            let n_bands = self.terms[0].observer.coupling.len();
-            let bands: Vec<usize> = (0..n_bands)
-                .filter(|&n| self.terms.iter().any(|t| stencil_bands(t)[n]))
-                .collect();
-            let pad = self.terms.iter().filter_map(|t| t.observer.gather_pad()).max();
-            self.gather = pad.filter(|_| !bands.is_empty()).map(|pad| Gather { pad, bands });
+            self.gather = Gather::of(&self.terms, self.terms[0].observer.coupling.len());
         }
         self.make_scratch();
         self
