@@ -673,6 +673,20 @@ mod tests {
         fd_check(&tied, &xt);
     }
 
+    /// What the tests of the objective's product paths evaluate, for target `t`'s display: the unknowns, a
+    /// light field, a direction for the curvature product, the target's objective, and leak directions from a
+    /// dark bar.
+    fn paths_fixture(t: &Observer, n_bands: usize) -> (usize, Vec<f32>, Vec<f32>, Vec<f32>, LeakPatterns) {
+        let n = t.n_samples() * n_bands;
+        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
+        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
+        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
+        let g = t.grid();
+        let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
+        let leak = LeakPatterns::new(&doc, g.width, g.height, None);
+        (n, x, v, obj_t, leak)
+    }
+
     /// The gathered path (one light field gathered for every term, the adjoints combined per view) gives the
     /// value, gradient and curvature product of the one-term-at-a-time path bit for bit, with stencil and FFT
     /// products mixed.
@@ -702,13 +716,7 @@ mod tests {
         let r = by(observer(&d, -0.9, 0.0, vec![], Optics::Wave), 2);
         let (pt, pr) = (t.gather_pad().unwrap(), r.gather_pad().unwrap());
         assert_ne!(pt, pr, "operators of different padding read one gathered field");
-        let n = t.n_samples() * d.n_bands();
-        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
-        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
-        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
-        let g = t.grid();
-        let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
-        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        let (n, x, v, obj_t, leak) = paths_fixture(&t, d.n_bands());
         let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
         let (gathered, plain) = (mk().without_shared_transforms(), mk().without_gathering());
         let g = gathered.gather.as_ref().expect("a gathered light field");
@@ -736,13 +744,7 @@ mod tests {
         let d = small_display();
         let t = observer(&d, 0.1, 0.2, vec![], Optics::Wave);
         let r = observer(&d, -0.9, 0.0, vec![], Optics::Wave);
-        let n = t.n_samples() * d.n_bands();
-        let x: Vec<f32> = (0..n).map(|i| 0.3 + 0.4 * ((i * 31 % 17) as f32 / 17.0)).collect();
-        let v: Vec<f32> = (0..n).map(|i| ((i * 7 % 11) as f32 - 5.0) * 0.05).collect();
-        let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
-        let g = t.grid();
-        let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
-        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        let (n, x, v, obj_t, leak) = paths_fixture(&t, d.n_bands());
         let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), 3.0, 1e-3);
         let (shared, plain) = (mk().with_shared_transforms(), mk().without_gathering());
         let run = |o: &MultiplexObjective| {

@@ -185,11 +185,7 @@ pub(crate) struct FftKernels {
     plan: FftPlan,
     /// The grid P/k × Q/k of the views' transforms.
     small: FftPlan,
-    holes_x: usize,
-    holes_y: usize,
-    views_u: usize,
-    views_v: usize,
-    k: usize,
+    shape: Shape,
     /// K̂_v / (P·Q), per view.
     weights: OnceLock<Vec<Vec<Complex32>>>,
     /// Per term, per view.
@@ -202,25 +198,14 @@ pub(crate) struct FftKernels {
 }
 
 impl FftKernels {
-    /// The plan for `views` over holes_x × holes_y holes with views_u × views_v views and k retinal pixels per
-    /// hole; spectra are computed when first used.
-    pub(crate) fn new(
-        views: &[ViewStencil],
-        holes: (usize, usize),
-        view_counts: (usize, usize),
-        k: usize,
-        n_terms: usize,
-        deferred: bool,
-    ) -> Self {
-        let (p, q) = small_grid_size(views, holes, k);
+    /// The plan for `views` on a display of `shape`; spectra are computed when first used.
+    pub(crate) fn new(views: &[ViewStencil], shape: Shape, n_terms: usize, deferred: bool) -> Self {
+        let k = shape.k;
+        let (p, q) = small_grid_size(views, (shape.holes_x, shape.holes_y), k);
         Self {
             plan: FftPlan::new(p * k, q * k),
             small: FftPlan::new(p, q),
-            holes_x: holes.0,
-            holes_y: holes.1,
-            views_u: view_counts.0,
-            views_v: view_counts.1,
-            k,
+            shape,
             weights: OnceLock::new(),
             derivatives: (0..n_terms).map(|_| OnceLock::new()).collect(),
             deferred,
@@ -263,7 +248,7 @@ impl FftKernels {
         out: &mut [f32],
     ) {
         let kernels = self.spectra(views, term);
-        let shape = self.shape();
+        let shape = self.shape;
         let spectra = view_spectra(&self.small, &shape, l, n_bands, band);
         let total = spectrum_product(&self.plan, &self.small, [(kernels, spectra.as_slice())].into_iter());
         write_image(&self.plan, &shape, total, c, accumulate, out);
@@ -281,7 +266,7 @@ impl FftKernels {
         planes: &mut [f32],
     ) {
         let kernels = self.spectra(views, term);
-        let shape = self.shape();
+        let shape = self.shape;
         let y_spec = image_spectrum(&self.plan, &shape, y, c);
         let (nu, nv, ny) = (shape.views_u, shape.views_v, shape.holes_y);
         assert_eq!(planes.len(), nu * nv * ny * stride, "planes length");
@@ -292,16 +277,6 @@ impl FftKernels {
                 view_plane(&self.small, &shape, spec, s, plane, stride);
             },
         );
-    }
-
-    fn shape(&self) -> Shape {
-        Shape {
-            holes_x: self.holes_x,
-            holes_y: self.holes_y,
-            views_u: self.views_u,
-            views_v: self.views_v,
-            k: self.k,
-        }
     }
 }
 

@@ -532,14 +532,8 @@ impl StencilOperator {
 
     /// The FFT form of the kernels; `deferred`: each term's first product still runs by stencils.
     fn fft_kernels(&self, deferred: bool) -> FftKernels {
-        FftKernels::new(
-            &self.views,
-            (self.holes_x, self.holes_y),
-            (self.views_u, self.views_v),
-            self.k,
-            self.views.first().map_or(0, |v| v.derivatives.len()),
-            deferred,
-        )
+        let n_terms = self.views.first().map_or(0, |v| v.derivatives.len());
+        FftKernels::new(&self.views, self.shape(), n_terms, deferred)
     }
 
     /// The display's counts as the products see them.
