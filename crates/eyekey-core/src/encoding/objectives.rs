@@ -82,7 +82,7 @@ struct Scratch {
     image: Vec<f32>,
     share: Vec<f32>,
     /// Where the terms' kernels are held on shared grids: the transforms of the term's adjoint input.
-    spectra: Option<ImageSpectra>,
+    spectra: ImageSpectra,
 }
 
 /// The light field gathered once for every term's forward products: its padding (the widest term's) and the
@@ -137,10 +137,13 @@ impl<'a> MultiplexObjective<'a> {
         assert!(!terms.is_empty(), "at least one observer");
         let n_unknowns = terms[0].observer.n_samples() * n_bands;
         let tikhonov = tikhonov / n_unknowns.max(1) as f64;
-        let gather = Gather::of(&terms, n_bands);
         let stencils: Option<Vec<Vec<&StencilOperator>>> = terms.iter().map(|t| t.observer.band_stencils()).collect();
         let shared = stencils.and_then(|ops| shared_spectra(&ops, true));
-        let gather = gather.filter(|_| shared.is_none());
+        let gather = if shared.is_none() {
+            Gather::of(&terms, n_bands)
+        } else {
+            None
+        };
         let mut objective = Self {
             terms,
             n_unknowns,
@@ -174,7 +177,7 @@ impl<'a> MultiplexObjective<'a> {
                         self.n_unknowns
                     }
                 ],
-                spectra: None,
+                spectra: ImageSpectra::default(),
             })
             .collect();
         *self.scratch.get_mut().unwrap_or_else(|e| e.into_inner()) = scratch;
@@ -283,14 +286,11 @@ impl MultiplexObjective<'_> {
             .map(|((o, t), s)| {
                 shared.forward(o, &views, &t.observer.coupling, &mut s.image);
                 let f = at_view(t, &mut s.image);
-                s.spectra = Some(shared.image_spectra(&s.image, &t.observer.coupling));
+                shared.image_spectra(&s.image, &t.observer.coupling, &mut s.spectra);
                 f
             })
             .collect();
-        let images: Vec<&ImageSpectra> = scratch
-            .iter()
-            .map(|s| s.spectra.as_ref().expect("every term's transforms, just made"))
-            .collect();
+        let images: Vec<&ImageSpectra> = scratch.iter().map(|s| &s.spectra).collect();
         shared.adjoint(&images, x, self.tikhonov as f32, self.scale as f32, &mut views, out);
         values
     }

@@ -267,7 +267,8 @@ impl FftKernels {
     ) {
         let kernels = self.spectra(views, term);
         let shape = self.shape;
-        let y_spec = image_spectrum(&self.plan, &shape, y, c);
+        let mut y_spec = Vec::new();
+        image_spectrum(&self.plan, &shape, y, c, &mut y_spec);
         let (nu, nv, ny) = (shape.views_u, shape.views_v, shape.holes_y);
         assert_eq!(planes.len(), nu * nv * ny * stride, "planes length");
         planes.par_chunks_mut(ny * stride).enumerate().for_each_init(
@@ -419,7 +420,7 @@ fn write_image(
     out: &mut [f32],
 ) {
     let mut s = plan.scratch();
-    let mut img = vec![0f32; plan.p * plan.q];
+    let mut img = std::mem::take(&mut s.img);
     let (w, h) = (shape.holes_x * shape.k, shape.holes_y * shape.k);
     let p = plan.p;
     plan.inverse(&mut total, 0..h, &mut img, &mut s);
@@ -433,21 +434,20 @@ fn write_image(
     });
 }
 
-/// Ŷ of the coupled image ỹ = Σ_a c_a y_a, zero-padded onto `plan`'s grid.
-fn image_spectrum(plan: &FftPlan, shape: &Shape, y: &[f32], c: [f32; 3]) -> Vec<Complex32> {
-    let (p, q) = (plan.p, plan.q);
+/// Ŷ of the coupled image ỹ = Σ_a c_a y_a, zero-padded onto `plan`'s grid, into `y_spec` (sized here).
+fn image_spectrum(plan: &FftPlan, shape: &Shape, y: &[f32], c: [f32; 3], y_spec: &mut Vec<Complex32>) {
+    let p = plan.p;
     let (w, h) = (shape.holes_x * shape.k, shape.holes_y * shape.k);
     let mut s = plan.scratch();
-    let mut img = vec![0f32; p * q];
+    let mut img = std::mem::take(&mut s.img);
     for gy in 0..h {
         for gx in 0..w {
             let px = &y[(gy * w + gx) * 3..(gy * w + gx) * 3 + 3];
             img[gy * p + gx] = c[0] * px[0] + c[1] * px[1] + c[2] * px[2];
         }
     }
-    let mut y_spec = vec![Complex32::default(); plan.h * q];
-    plan.forward(&mut img, 0..h, &mut y_spec, &mut s);
-    y_spec
+    y_spec.resize(plan.h * plan.q, Complex32::default());
+    plan.forward(&mut img, 0..h, y_spec, &mut s);
 }
 
 /// One view's correlation Σ conj(K̂_v)·Ŷ over the (kernel, image spectrum) pairs given, folded onto the small
@@ -525,7 +525,6 @@ pub(crate) struct SharedSpectra {
     shape: Shape,
     /// Per band.
     bands: Vec<BandSpectra>,
-    n_observers: usize,
 }
 
 /// One band's grid and every observer's kernels on it.
@@ -545,22 +544,34 @@ pub(crate) struct ViewSpectra {
     planes: Vec<f32>,
 }
 
-/// One observer's adjoint input transformed ([`SharedSpectra::image_spectra`]): per band, Ŷ of Σ_a c_a y_a.
+/// One observer's adjoint input transformed ([`SharedSpectra::image_spectra`]): per band, Ŷ of Σ_a c_a y_a
+/// (its buffers kept from one product to the next).
+#[derive(Default)]
 pub(crate) struct ImageSpectra(Vec<Vec<Complex32>>);
 
 impl SharedSpectra {
-    /// `views[o][n]`: observer o's kernels of band n (every observer on one display of `shape`).
-    pub(crate) fn new(shape: Shape, views: &[Vec<&[ViewStencil]>]) -> Self {
+    /// The small grid (P', Q') of each band: the widest extent of every observer's kernels of that band.
+    pub(crate) fn grids(shape: Shape, views: &[Vec<&[ViewStencil]>]) -> Vec<(usize, usize)> {
         let n_bands = views.first().map_or(0, |o| o.len());
         assert!(
             views.iter().all(|o| o.len() == n_bands),
             "every observer has every band"
         );
-        let holes = (shape.holes_x, shape.holes_y);
-        let bands = (0..n_bands)
+        (0..n_bands)
             .map(|n| {
                 let all = views.iter().flat_map(|o| o[n].iter());
-                let (p, q) = small_grid_of(all, holes, shape.k);
+                small_grid_of(all, (shape.holes_x, shape.holes_y), shape.k)
+            })
+            .collect()
+    }
+
+    /// `views[o][n]`: observer o's kernels of band n (every observer on one display of `shape`), on the
+    /// bands' [`Self::grids`].
+    pub(crate) fn new(shape: Shape, views: &[Vec<&[ViewStencil]>], grids: &[(usize, usize)]) -> Self {
+        let bands = grids
+            .iter()
+            .enumerate()
+            .map(|(n, &(p, q))| {
                 let plan = FftPlan::new(p * shape.k, q * shape.k);
                 let kernels = views.iter().map(|o| kernel_spectra(&plan, o[n], None)).collect();
                 BandSpectra {
@@ -570,29 +581,22 @@ impl SharedSpectra {
                 }
             })
             .collect();
-        Self {
-            shape,
-            bands,
-            n_observers: views.len(),
-        }
+        Self { shape, bands }
     }
 
     /// Whether products through one grid per band are expected to cost less than each operator's own (the
     /// flops of [`fft_is_cheaper`]'s model, per direction): the views' transforms once, and per observer the
     /// spectrum product and one transform on the shared grid, against each operator's stencils (`taps`) or
     /// its own FFTs (on its own grid `own_grid`), whichever it runs.
-    pub(crate) fn pays(shape: Shape, views: &[Vec<&[ViewStencil]>], own: &[Vec<OwnCost>]) -> bool {
+    pub(crate) fn pays(shape: Shape, grids: &[(usize, usize)], own: &[Vec<OwnCost>]) -> bool {
         let n_views = (shape.views_u * shape.views_v) as f64;
         let k = shape.k;
-        let holes = (shape.holes_x, shape.holes_y);
-        let n_bands = views.first().map_or(0, |o| o.len());
         let mut shared = 0.0;
-        for n in 0..n_bands {
-            let (p, q) = small_grid_of(views.iter().flat_map(|o| o[n].iter()), holes, k);
+        for &(p, q) in grids {
             let small = (p * q) as f64;
             let full = small * (k * k) as f64;
             shared += FFT_FLOP_COST * n_views * 2.5 * small * small.log2();
-            shared += FFT_FLOP_COST * views.len() as f64 * (2.5 * full * full.log2() + 4.0 * full * n_views);
+            shared += FFT_FLOP_COST * own.len() as f64 * (2.5 * full * full.log2() + 4.0 * full * n_views);
         }
         let separate: f64 = own.iter().flatten().map(|c| c.flops()).sum();
         shared < separate
@@ -625,16 +629,13 @@ impl SharedSpectra {
         }
     }
 
-    /// The transforms of Σ_a c_na y_a per band n: an observer's adjoint input `y[r·3 + a]` for
-    /// [`Self::adjoint`].
-    pub(crate) fn image_spectra(&self, y: &[f32], coupling: &[[f32; 3]]) -> ImageSpectra {
-        ImageSpectra(
-            self.bands
-                .iter()
-                .zip(coupling)
-                .map(|(b, c)| image_spectrum(&b.plan, &self.shape, y, *c))
-                .collect(),
-        )
+    /// The transforms of Σ_a c_na y_a per band n, into `out` (its buffers reused): an observer's adjoint input
+    /// `y[r·3 + a]` for [`Self::adjoint`].
+    pub(crate) fn image_spectra(&self, y: &[f32], coupling: &[[f32; 3]], out: &mut ImageSpectra) {
+        out.0.resize_with(self.bands.len(), Vec::new);
+        for ((b, c), spec) in self.bands.iter().zip(coupling).zip(&mut out.0) {
+            image_spectrum(&b.plan, &self.shape, y, *c, spec);
+        }
     }
 
     /// `out[p·N + n]` = 2μ·x + c·Σ_o (observer o's Σ_a c_na (T_nᵀ y_oa))_p, from every observer's
@@ -649,7 +650,8 @@ impl SharedSpectra {
         buffers: &mut ViewSpectra,
         out: &mut [f32],
     ) {
-        assert_eq!(images.len(), self.n_observers, "one image per observer");
+        let observers = self.bands.first().map_or(0, |b| b.kernels.len());
+        assert_eq!(images.len(), observers, "one image per observer");
         let Shape {
             holes_x: nx,
             holes_y: ny,

@@ -964,13 +964,14 @@ pub(crate) fn shared_spectra(ops: &[Vec<&StencilOperator>], only_if_cheaper: boo
         .iter()
         .map(|o| o.iter().map(|op| op.views.as_slice()).collect())
         .collect();
+    let grids = SharedSpectra::grids(shape, &views);
     if only_if_cheaper {
         let own: Vec<Vec<OwnCost>> = ops.iter().map(|o| o.iter().map(|op| op.own_cost()).collect()).collect();
-        if !SharedSpectra::pays(shape, &views, &own) {
+        if !SharedSpectra::pays(shape, &grids, &own) {
             return None;
         }
     }
-    Some(SharedSpectra::new(shape, &views))
+    Some(SharedSpectra::new(shape, &views, &grids))
 }
 
 /// Bands of a light field laid out as the stencils' forward products read them ([`StencilOperator::gather`]):
@@ -1266,7 +1267,9 @@ mod tests {
                     }
                 }
                 let y = random(pixels * 3, 20 + o as u64);
-                images.push(shared.image_spectra(&y, &cs[o]));
+                let mut image = ImageSpectra::default();
+                shared.image_spectra(&y, &cs[o], &mut image);
+                images.push(image);
                 for (p, n) in (0..samples).flat_map(|p| (0..n_bands).map(move |n| (p, n))) {
                     let back: f64 = (0..pixels)
                         .map(|r| t[n][r][p] * (0..3).map(|a| cs[o][n][a] as f64 * y[r * 3 + a] as f64).sum::<f64>())
