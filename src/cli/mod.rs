@@ -169,6 +169,10 @@ pub enum ExperimentCommand {
         /// written to `headbox-only.md`).
         #[arg(long)]
         only: Option<String>,
+        /// Also look at the same people at the design position through this many more kernel draws, and
+        /// through kernels near their expectation (the target guard's sub-rays), each counted apart.
+        #[arg(long, default_value_t = 0)]
+        seat_kernel_draws: u32,
         #[command(flatten)]
         overrides: crate::research::bystanders::Overrides,
     },
@@ -667,11 +671,19 @@ pub fn run(cli: Cli) -> Result<()> {
             population,
             max_iterations,
             only,
+            seat_kernel_draws,
             overrides,
         }) => {
             print!(
                 "{}",
-                crate::research::bystanders::headbox(&out, population, max_iterations, only.as_deref(), overrides)?
+                crate::research::bystanders::headbox(
+                    &out,
+                    population,
+                    max_iterations,
+                    only.as_deref(),
+                    seat_kernel_draws,
+                    overrides
+                )?
             );
         }
         Command::Experiment(ExperimentCommand::Encoders {

@@ -208,7 +208,7 @@ impl Baseline {
         let enc = encode(&spec, &self.cache, &|_| {}, &AtomicBool::new(false))?;
         for c in &enc.solver.draws {
             eprintln!(
-                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read, {} of {} camera settings read (the seat and its first repeat past 10 mm){}",
+                "{label}: draw {}: target reads {}, ring {} of {}, {} of {} fresh people read, {} of {} camera settings read (the seat and its first repeat past 10 mm){}{}",
                 c.seed,
                 c.target_reads,
                 c.ring_read,
@@ -217,6 +217,11 @@ impl Baseline {
                 c.people,
                 c.cameras_read,
                 c.cameras,
+                if c.confirm_people > 0 {
+                    format!("; confirmed: {} of {} more people read", c.confirm_read, c.confirm_people)
+                } else {
+                    String::new()
+                },
                 if c.kept { " (kept)" } else { "" }
             );
         }
@@ -788,6 +793,66 @@ pub(super) fn head_rings(
     Ok(out)
 }
 
+/// How many of the evaluation's `population` people at the design position read `l` through other kernel
+/// draws: the evaluation's own draw again (the evaluation's count, as a check), `draws` more at its sub-rays, and
+/// one at `GUARD_SUB_RAYS` times them; a row each in `md`.
+fn seat_kernels(
+    base: &Baseline,
+    l: &[f32],
+    reference: &eyekey_core::evaluation::Reference,
+    population: u32,
+    draws: u32,
+    label: &str,
+    md: &mut String,
+) -> Result<()> {
+    use eyekey_core::physics::transport::{EyePosition, TransportOptions};
+    use rayon::prelude::*;
+    let evaluation = EvaluationOptions::population_only(population, None);
+    let people =
+        eyekey_core::physics::population::sample_population(population as usize, evaluation.seed, Default::default());
+    let sub_rays = 12;
+    let guard = eyekey_core::encoding::pipeline::GUARD_SUB_RAYS;
+    // The evaluation's transport seed (`evaluate`), then others.
+    let mut looks = vec![("the evaluation's draw".to_string(), sub_rays, evaluation.seed ^ 0xE7A1)];
+    looks.extend((1..=u64::from(draws)).map(|k| (format!("draw {k}"), sub_rays, 0x5EA7_0000 + k)));
+    looks.push((format!("{guard}× the sub-rays"), guard * sub_rays, 0x5EA7_1000));
+    for (name, rays, seed) in looks {
+        let t = Instant::now();
+        let opts = TransportOptions {
+            sub_rays: rays,
+            seed,
+            ..Default::default()
+        };
+        let read = people
+            .par_iter()
+            .map(|p| {
+                let o = eyekey_core::physics::observer::Observer::new(
+                    &base.display,
+                    p,
+                    EyePosition::default(),
+                    &opts,
+                    Optics::Wave,
+                    &base.cache,
+                )?;
+                Ok(u32::from(reference.score_observer("seat", &o, l).0.readable))
+            })
+            .collect::<Result<Vec<u32>>>()?
+            .into_iter()
+            .sum::<u32>();
+        let (lo, hi) = eyekey_core::evaluation::wilson_interval(u64::from(read), people.len() as u64, 1.96);
+        writeln!(
+            md,
+            "| {label} | {name} ({rays} sub-rays) | {read} of {} ({:.1}–{:.1} %) | {:.0} s |",
+            people.len(),
+            100.0 * lo,
+            100.0 * hi,
+            t.elapsed().as_secs_f64()
+        )?;
+        eprintln!("{label}: seat, {name} ({rays} sub-rays): {read} of {}", people.len());
+    }
+    Ok(())
+}
+
 /// The head-box experiment: the wave sweep's baseline encoding, shown fixed or re-indexed for the tracked eye,
 /// and encodings with the target stacked at 4 positions on a ring (2.5 mm, 5 mm); the target's readings over
 /// ±5 mm and the fraction of `population` people at the design position who read each. Writes
@@ -797,6 +862,7 @@ pub fn headbox(
     population: u32,
     max_iterations: u32,
     only: Option<&str>,
+    seat_kernel_draws: u32,
     overrides: Overrides,
 ) -> Result<String> {
     std::fs::create_dir_all(out)?;
@@ -818,6 +884,12 @@ pub fn headbox(
         display.holes_y,
     )?);
     let offsets = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+    let mut kernels_md = table_header(&[
+        "frames",
+        "kernels the people at the design position look through",
+        "people who read (95 % CI)",
+        "time",
+    ]);
     let mut md = table_header(&[
         "frames",
         "encode",
@@ -1172,6 +1244,17 @@ pub fn headbox(
             &|_| {},
         )?;
         let p = ev.report.population.as_ref().expect("a population was asked for");
+        if seat_kernel_draws > 0 {
+            seat_kernels(
+                &base,
+                &l,
+                &reference,
+                population,
+                seat_kernel_draws,
+                label,
+                &mut kernels_md,
+            )?;
+        }
         let rings = head_rings(display, &l, target, &reference, method, &offsets, cache)?;
         let cells: Vec<String> = rings.iter().map(|(_, w, read)| format!("{w:.2} ({read})")).collect();
         writeln!(
@@ -1184,6 +1267,16 @@ pub fn headbox(
             cells.join(" / ")
         )?;
         eprintln!("{label}: {}", md.lines().last().unwrap_or(""));
+    }
+    if seat_kernel_draws > 0 {
+        write!(
+            md,
+            "\nThe same {population} people at the design position (the evaluation's sample), each looked at \
+             through the evaluation's kernel draw again, through {seat_kernel_draws} more draws of as many \
+             sub-rays, and through kernels drawn with {}× the sub-rays (the target guard's, near their \
+             expectation, which is what a real eye sees):\n\n{kernels_md}",
+            eyekey_core::encoding::pipeline::GUARD_SUB_RAYS
+        )?;
     }
     std::fs::write(
         out.join(if only.is_some() {

@@ -102,10 +102,11 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
         + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_POSITIONS);
     let d = unknowns as f64;
     // Each draw (`draws`) solves again and is checked with fresh people, a tracked head ring and the camera's
-    // sweep at the seat and its first repeat past 10 mm.
+    // sweep at the seat and its first repeat past 10 mm, and at most confirmed with more fresh people.
     let draws = f64::from(options.draws.max(1));
     let checked = if options.draws > 1 {
         u64::from(super::options::DRAW_CHECK_PEOPLE)
+            + u64::from(super::options::DRAW_CONFIRM_PEOPLE)
             + 21
             + camera_sweep_settings(display) * super::pipeline::draw_check_camera_positions(display).len() as u64
     } else {
@@ -190,13 +191,13 @@ mod tests {
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Three draws: three solves, each checked with 200 fresh people, the target, 20 ring positions and the
         // camera (27 lenses × 7 channels) at the seat and at its repeat 12.8 mm right, left, above and below
-        // (`secure` repeats every 6.4 mm at the pupil).
+        // (`secure` repeats every 6.4 mm at the pupil), and at most confirmed with 400 more people.
         let o = EncodeOptions {
             draws: 3,
             ..Default::default()
         };
         let seconds =
-            3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (221.0 + 5.0 * 189.0) * 2e-7) + 1e6 * 167.0 * 2e-7;
+            3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (621.0 + 5.0 * 189.0) * 2e-7) + 1e6 * 167.0 * 2e-7;
         assert!((footprint(&d, &o, 0).seconds - seconds).abs() < 1e-6);
     }
 

@@ -125,6 +125,14 @@ pub struct DrawCheck {
     /// Camera settings and channels looked at.
     #[serde(default)]
     pub cameras: u32,
+    /// Of `confirm_people` more fresh people at the seat, sampled as the evaluation samples them and looked at
+    /// through a kernel draw of their own, those who read: the second look a draw gets when its check held the
+    /// seat and it could be kept (0 of 0 otherwise).
+    #[serde(default)]
+    pub confirm_read: u32,
+    /// People the confirmation looked at.
+    #[serde(default)]
+    pub confirm_people: u32,
     /// Whether this draw's light field was kept.
     pub kept: bool,
 }

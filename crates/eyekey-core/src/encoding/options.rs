@@ -193,8 +193,11 @@ pub struct EncodeOptions {
     /// a tracked eye (frames re-indexed for it); then the fewest of those people read (half with pupils
     /// bracketing the target's when near-pupil decoys are asked), all through a kernel draw and from a
     /// seed stream the evaluation never uses, judged as the evaluation judges (the known-font attacker where the
-    /// text is known; the legibility threshold, far more lenient, otherwise). The encoder's seed alone decides
-    /// whether a head box holds (docs/experiments.md §2c).
+    /// text is known; the legibility threshold, far more lenient, otherwise). A draw whose check held the seat is
+    /// confirmed by [`DRAW_CONFIRM_PEOPLE`] more fresh people (sampled as the evaluation samples them, through a
+    /// kernel draw of their own) before it may be kept, and one whose seat held under that confirmation is kept
+    /// before any other: the best of several checks is biased low. The encoder's seed alone decides whether a
+    /// head box holds (docs/experiments.md §2c).
     pub draws: u32,
     /// After the solve, check that the target reads its own view (the evaluation's judge); if not, halve every
     /// decoy's weight and leak weight and solve again from the last solve's end, until the target reads or the
@@ -282,6 +285,10 @@ pub const DRAW_SEED_STEP: u64 = 1_000_003;
 
 /// Fresh people at the seat each draw is checked with (`draws`).
 pub const DRAW_CHECK_PEOPLE: u32 = 200;
+
+/// Fresh people at the seat who confirm a draw whose check held the seat before it may be kept (`draws`): at
+/// fewer than 1 % reading (3 of 400), a draw that lets 3.7 % read passes about once in 5,000, one that lets 2 % about once in 25.
+pub const DRAW_CONFIRM_PEOPLE: u32 = 400;
 
 /// Stacked positions a head-box round adds at most (`head_rounds`).
 pub const HEAD_ROUND_MAX_ADDED: u32 = 4;
