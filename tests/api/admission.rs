@@ -49,7 +49,8 @@ async fn the_largest_display_registers_but_its_default_job_is_refused_for_its_ti
 #[tokio::test]
 async fn a_display_no_job_could_run_on_is_refused_at_registration() {
     let app = spawn_app_with(|c| c.max_job_memory_bytes = 4 << 30).await;
-    // Its cheapest job, the target alone for one iteration, needs 4.9 GB.
+    // Its cheapest job, the target alone for one iteration, needs 5.7 GB: the solver's vectors (4.9 GB), the
+    // target's spectra (0.8 GB) and ray bundles.
     let r = app
         .op_post("/v1/displays", &json!({ "name": "largest", "geometry": largest() }))
         .await;
@@ -58,7 +59,7 @@ async fn a_display_no_job_could_run_on_is_refused_at_registration() {
     let message = body["error"]["message"].as_str().unwrap();
     assert_eq!(body["error"]["field"], "geometry");
     assert!(
-        message.contains("4670 MiB") && message.contains("64000000 unknowns") && message.contains("4096 MiB"),
+        message.contains("5464 MiB") && message.contains("64000000 unknowns") && message.contains("4096 MiB"),
         "{message}"
     );
     let listed = expect_json(app.op_get("/v1/displays").await, StatusCode::OK).await;
@@ -67,13 +68,13 @@ async fn a_display_no_job_could_run_on_is_refused_at_registration() {
 
 #[tokio::test]
 async fn a_job_over_the_memory_limit_is_refused_with_its_estimate_and_nothing_is_queued() {
-    // The tiny display's job needs about 32 MiB; allow 64.
-    let app = spawn_app_with(|c| c.max_job_memory_bytes = 64 << 20).await;
+    // The tiny display's job needs about 42 MiB; allow 128.
+    let app = spawn_app_with(|c| c.max_job_memory_bytes = 128 << 20).await;
     let f = app.fixtures().await;
     let body = job_body(&f);
     expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
-    // A display 16 times as large registers (its cheapest job needs about 49 MiB); with 64 decoys its job
-    // would need about 107 MiB.
+    // A display 16 times as large registers (its cheapest job needs about 100 MiB, most of it the ray bundles
+    // its largest pupils would sample); with 64 decoys its job would need about 600 MiB.
     let big = DisplayGeometry {
         holes_x: 48,
         holes_y: 48,
@@ -91,7 +92,7 @@ async fn a_job_over_the_memory_limit_is_refused_with_its_estimate_and_nothing_is
     let error: serde_json::Value = r.json().await.unwrap();
     let message = error["error"]["message"].as_str().unwrap();
     assert!(
-        message.contains("limits of 64 MiB") && message.contains("65 observers"),
+        message.contains("limits of 128 MiB") && message.contains("65 observers"),
         "{message}"
     );
     let jobs = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;

@@ -20,7 +20,7 @@ use super::rng::{SubRayDraws, RAY_BATCH, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, sin_cos_turns, Tracer};
 use crate::physics::diffraction::{airy_intensity, sinc2, AiryTable};
-use crate::physics::display::Aperture;
+use crate::physics::display::{Aperture, DisplayGeometry};
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
 
 /// One tap of a view's kernel: the offset (retinal pixels) from the sample's block origin, its weight and
@@ -328,12 +328,14 @@ struct RayBundle {
 }
 
 impl RayBundle {
+    /// The bytes the bundle holds (its vectors' capacity, which the cache's bound counts).
     fn bytes(&self) -> usize {
         self.views
             .iter()
-            .map(|v| v.len() * std::mem::size_of::<AimedRay>())
+            .map(|v| v.capacity() * std::mem::size_of::<AimedRay>())
             .sum::<usize>()
-            + 64
+            + self.traced.capacity() * std::mem::size_of::<u64>()
+            + std::mem::size_of::<Self>()
     }
 }
 
@@ -341,7 +343,16 @@ impl RayBundle {
 const SAMPLING_PUPIL_STEP_MM: f64 = 0.25;
 
 /// How much memory the process's ray bundles may hold; the oldest go first.
-const RAY_BUNDLE_CACHE_BYTES: usize = 160 << 20;
+pub const RAY_BUNDLE_CACHE_BYTES: usize = 160 << 20;
+
+/// Whether some eye's kernels on `display` may be made of angle-sampled ray bundles ([`Tracer::samples_angle`]):
+/// on lenslets always; behind pinholes when the pattern's first dark ring at the shortest of `wavelengths_nm`
+/// can be narrower than the widest pupil a profile may have (9 mm).
+pub fn may_sample_angles(display: &DisplayGeometry, wavelengths_nm: &[f64]) -> bool {
+    let shortest = wavelengths_nm.iter().copied().fold(f64::INFINITY, f64::min) * 1e-6;
+    display.aperture == Aperture::Lenslet
+        || 1.22 * shortest * display.viewing_distance_mm / display.hole_diameter_mm <= 4.5
+}
 
 #[derive(Default)]
 struct BundleCache {
@@ -551,6 +562,8 @@ impl Tracer<'_> {
                 }
             }
         }
+        // The vector grew by doubling: up to twice the rays' bytes, held for as long as the bundle is cached.
+        out.shrink_to_fit();
         (out, traced)
     }
 
@@ -891,6 +904,70 @@ mod tests {
         assert!(!fast.overflow.is_empty(), "some landings reach past the box");
         assert_eq!(fast.w, corners.w);
         assert_eq!(fast.overflow, corners.overflow);
+    }
+
+    /// A ray bundle holds no more than its rays (its vectors trimmed when traced, so the cache's bound counts what
+    /// is held), and no more than the admission model allows a bundle
+    /// (`footprint::*BUNDLE_BYTES_PER_KERNEL_RAY` per view and kernel ray), for the widest pupil a profile may
+    /// have, at the shortest and longest wavelengths, on `secure`'s and `lenslet`'s lenslets and `pinhole`'s
+    /// pinholes.
+    #[test]
+    fn a_ray_bundle_holds_its_rays_and_no_more_than_admission_counts() {
+        use crate::encoding::footprint::{BUNDLE_BYTES_PER_KERNEL_RAY, PINHOLE_BUNDLE_BYTES_PER_KERNEL_RAY};
+        use crate::physics::diffraction::DiffractionSampler;
+        use crate::physics::display::DisplayGeometry;
+        use crate::physics::transport::{RetinalGrid, TransportOptions, WaveSampling};
+        use crate::physics::zernike::ZernikeCoefficients;
+        let rays = 682; // `KERNEL_RAYS_PER_SUB_RAY` × 16 sub-rays / 3 wavelengths a band
+        for display in [
+            DisplayGeometry::secure(),
+            DisplayGeometry::lenslet(),
+            DisplayGeometry::pinhole(),
+        ] {
+            for wavelength_nm in [440.0, 650.0] {
+                let wavefront = ZernikeCoefficients::new(9.0, vec![0.0; 15]).unwrap();
+                let options = TransportOptions {
+                    wave: Some(WaveSampling {
+                        wavelength_nm,
+                        neighbour_blocks: 1,
+                        kernel_rays: rays,
+                    }),
+                    seed: 77,
+                    ..Default::default()
+                };
+                let grid = RetinalGrid::for_display(&display, options.retina_oversample);
+                let r_p = wavefront.pupil_radius_mm();
+                let tracer = Tracer {
+                    display: &display,
+                    eye: EyePosition::default(),
+                    options: &options,
+                    d_eye: display.viewing_distance_mm,
+                    grid,
+                    r_p,
+                    poly: wavefront.polynomial(),
+                    term_polys: Vec::new(),
+                    shift_per_grad: display.viewing_distance_mm * 1e-3 / grid.pixel_mm / r_p,
+                    sampler: Some(DiffractionSampler::shared()),
+                    wave_weight: 0.0,
+                };
+                assert!(tracer.samples_angle(), "a 9 mm pupil samples angles here");
+                let bundle = tracer.ray_bundle(rays);
+                let held: usize = bundle.views.iter().map(|v| v.len()).sum();
+                assert!(held > 0);
+                assert!(bundle.views.iter().all(|v| v.capacity() == v.len()));
+                assert_eq!(
+                    bundle.bytes(),
+                    held * std::mem::size_of::<AimedRay>() + bundle.traced.len() * 8 + std::mem::size_of::<RayBundle>()
+                );
+                let views = (display.views_u * display.views_v) as usize;
+                let per_ray = match display.aperture {
+                    Aperture::Lenslet => BUNDLE_BYTES_PER_KERNEL_RAY,
+                    Aperture::Pinhole => PINHOLE_BUNDLE_BYTES_PER_KERNEL_RAY,
+                };
+                let allowed = per_ray as usize * views * rays as usize;
+                assert!(bundle.bytes() <= allowed, "{} of {allowed}", bundle.bytes());
+            }
+        }
     }
 
     /// A pinhole's pupil-sampled kernels traced in batches are those traced one sub-ray at a time, but for the
