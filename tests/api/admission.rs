@@ -59,7 +59,7 @@ async fn a_display_no_job_could_run_on_is_refused_at_registration() {
     let message = body["error"]["message"].as_str().unwrap();
     assert_eq!(body["error"]["field"], "geometry");
     assert!(
-        message.contains("5464 MiB") && message.contains("64000000 unknowns") && message.contains("4096 MiB"),
+        message.contains("5457 MiB") && message.contains("64000000 unknowns") && message.contains("4096 MiB"),
         "{message}"
     );
     let listed = expect_json(app.op_get("/v1/displays").await, StatusCode::OK).await;
