@@ -26,7 +26,9 @@ use super::options::EncodeOptions;
 use super::pipeline::GUARD_SUB_RAYS;
 use crate::physics::display::{Aperture, DisplayGeometry};
 use crate::physics::observer::{Optics, KERNEL_RAYS_PER_SUB_RAY};
-use crate::physics::transport::{may_sample_angles, TransportOptions, RAY_BUNDLE_CACHE_BYTES};
+use crate::physics::transport::{
+    angle_sampling_radius_mm, TransportOptions, RAY_BUNDLE_CACHE_BYTES, SAMPLING_PUPIL_STEP_MM,
+};
 
 /// Memory every job needs whatever its size: the process, tables and spectra.
 pub const BASE_BYTES: u64 = 32 << 20;
@@ -47,6 +49,9 @@ pub const KERNEL_REACH_HOLES: u64 = 10;
 pub const BUNDLE_BYTES_PER_KERNEL_RAY: u64 = 64;
 /// ... and behind pinholes: 26–30 on `pinhole` for a 9 mm pupil.
 pub const PINHOLE_BUNDLE_BYTES_PER_KERNEL_RAY: u64 = 32;
+/// The narrowest and widest pupils a profile may have (`VisionProfile::validate`), mm: the ray bundles' sampling
+/// pupils span them.
+pub const PUPIL_RANGE_MM: (f64, f64) = (2.0, 9.0);
 /// Seconds per unknown and observer to build its operators.
 pub const BUILD_SECONDS: f64 = 7e-7;
 /// Seconds per unknown, observer and solver iteration.
@@ -173,19 +178,23 @@ pub fn bundle_bytes(display: &DisplayGeometry, options: &EncodeOptions, observer
         .iter()
         .flat_map(|p| p.band_wavelengths_nm(q as usize))
         .collect();
-    if options.optics != Optics::Wave || !may_sample_angles(display, &wavelengths) {
+    // The sampling pupils (radii in steps up to the widest pupil) that sample angles at the shortest wavelength,
+    // where the pinholes' pattern is narrowest.
+    let from = wavelengths
+        .iter()
+        .map(|&l| angle_sampling_radius_mm(display, l, display.viewing_distance_mm))
+        .fold(f64::INFINITY, f64::min);
+    let widest = (PUPIL_RANGE_MM.1 / 2.0 / SAMPLING_PUPIL_STEP_MM).round() as u32;
+    let pupils = (1..=widest)
+        .filter(|k| f64::from(*k) * SAMPLING_PUPIL_STEP_MM >= from.max(PUPIL_RANGE_MM.0 / 2.0))
+        .count() as u64;
+    if options.optics != Optics::Wave || pupils == 0 {
         return 0;
     }
-    // The sampling pupils whose radius reaches the pinholes' first dark ring at the shortest wavelength.
-    let shortest = wavelengths.iter().copied().fold(f64::INFINITY, f64::min) * 1e-6;
-    let (ring, per_ray) = match display.aperture {
-        Aperture::Lenslet => (0.0, BUNDLE_BYTES_PER_KERNEL_RAY),
-        Aperture::Pinhole => (
-            1.22 * shortest * display.viewing_distance_mm / display.hole_diameter_mm,
-            PINHOLE_BUNDLE_BYTES_PER_KERNEL_RAY,
-        ),
+    let per_ray = match display.aperture {
+        Aperture::Lenslet => BUNDLE_BYTES_PER_KERNEL_RAY,
+        Aperture::Pinhole => PINHOLE_BUNDLE_BYTES_PER_KERNEL_RAY,
     };
-    let pupils = (4..=18).filter(|k| f64::from(*k) * 0.25 >= ring).count() as u64;
     let seat = 1 + u64::from(options.population_decoys) + u64::from(options.near_pupil_decoys);
     let looks = seat.min(observers).min(pupils) + observers.saturating_sub(seat);
     // One wavelength's bundle at the job's sub-rays: `KERNEL_RAYS_PER_SUB_RAY`·S/q rays a view.

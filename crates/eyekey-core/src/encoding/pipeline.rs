@@ -151,7 +151,7 @@ fn confirm_draw(
                 return Err(PipelineError::Cancelled);
             }
             let o = Observer::new(d, p, EyePosition::default(), &topts, o.optics, cache)
-                .map_err(|e| observer_error("target profile", e))?;
+                .map_err(|e| observer_error("the draws' confirmation", e))?;
             Ok(u32::from(reference.score_observer("confirm", &o, l).0.readable))
         })
         .collect::<Result<Vec<_>, PipelineError>>()?

@@ -340,18 +340,20 @@ impl RayBundle {
 }
 
 /// Sampling pupils come in steps of this radius (mm): an eye's rays are those of the next step up.
-const SAMPLING_PUPIL_STEP_MM: f64 = 0.25;
+pub const SAMPLING_PUPIL_STEP_MM: f64 = 0.25;
 
 /// How much memory the process's ray bundles may hold; the oldest go first.
 pub const RAY_BUNDLE_CACHE_BYTES: usize = 160 << 20;
 
-/// Whether some eye's kernels on `display` may be made of angle-sampled ray bundles ([`Tracer::samples_angle`]):
-/// on lenslets always; behind pinholes when the pattern's first dark ring at the shortest of `wavelengths_nm`
-/// can be narrower than the widest pupil a profile may have (9 mm).
-pub fn may_sample_angles(display: &DisplayGeometry, wavelengths_nm: &[f64]) -> bool {
-    let shortest = wavelengths_nm.iter().copied().fold(f64::INFINITY, f64::min) * 1e-6;
-    display.aperture == Aperture::Lenslet
-        || 1.22 * shortest * display.viewing_distance_mm / display.hole_diameter_mm <= 4.5
+/// The smallest pupil radius (mm) whose kernels at `distance_mm` and `wavelength_nm` are made of angle-sampled ray
+/// bundles ([`Tracer::samples_angle`]): behind pinholes the radius of the diffraction pattern's first dark ring at
+/// the pupil, 1.22·λ·d/a (a pattern wider than the pupil is sampled through the pupil instead); behind lenslets 0,
+/// every pupil.
+pub fn angle_sampling_radius_mm(display: &DisplayGeometry, wavelength_nm: f64, distance_mm: f64) -> f64 {
+    match display.aperture {
+        Aperture::Lenslet => 0.0,
+        Aperture::Pinhole => 1.22 * wavelength_nm * 1e-6 * distance_mm / display.hole_diameter_mm,
+    }
 }
 
 #[derive(Default)]
@@ -751,9 +753,8 @@ impl Tracer<'_> {
     /// sub-ray by the pattern's density at the angle that reaches it, times the pupil's solid angle. Both are
     /// the same expectation, importance-sampled two ways.
     fn samples_angle(&self) -> bool {
-        let d = self.display;
-        let lambda_mm = self.options.wave.expect("a wave-optics build").wavelength_nm * 1e-6;
-        !(d.aperture == Aperture::Pinhole && 1.22 * lambda_mm * self.d_eye / d.hole_diameter_mm > self.r_p)
+        let lambda_nm = self.options.wave.expect("a wave-optics build").wavelength_nm;
+        angle_sampling_radius_mm(self.display, lambda_nm, self.d_eye) <= self.r_p
     }
 
     /// Every view's kernel, each landing weighted so that a plain image is seen at its own intensity from
