@@ -793,27 +793,32 @@ pub(super) fn head_rings(
     Ok(out)
 }
 
-/// How many of the evaluation's `population` people at the design position read `l` through other kernel
+/// How many of `evaluation`'s people at the design position read `l` through other kernel
 /// draws: the evaluation's own draw again (the evaluation's count, as a check), `draws` more at its sub-rays, and
 /// one at `GUARD_SUB_RAYS` times them; a row each in `md`.
 fn seat_kernels(
     base: &Baseline,
     l: &[f32],
     reference: &eyekey_core::evaluation::Reference,
-    population: u32,
+    evaluation: &EvaluationOptions,
     draws: u32,
     label: &str,
     md: &mut String,
 ) -> Result<()> {
     use eyekey_core::physics::transport::{EyePosition, TransportOptions};
     use rayon::prelude::*;
-    let evaluation = EvaluationOptions::population_only(population, None);
-    let people =
-        eyekey_core::physics::population::sample_population(population as usize, evaluation.seed, Default::default());
-    let sub_rays = 12;
+    let people = eyekey_core::physics::population::sample_population(
+        evaluation.population as usize,
+        evaluation.seed,
+        Default::default(),
+    );
+    let sub_rays = evaluation.sub_rays;
     let guard = eyekey_core::encoding::pipeline::GUARD_SUB_RAYS;
-    // The evaluation's transport seed (`evaluate`), then others.
-    let mut looks = vec![("the evaluation's draw".to_string(), sub_rays, evaluation.seed ^ 0xE7A1)];
+    let mut looks = vec![(
+        "the evaluation's draw".to_string(),
+        sub_rays,
+        evaluation.transport_seed(),
+    )];
     looks.extend((1..=u64::from(draws)).map(|k| (format!("draw {k}"), sub_rays, 0x5EA7_0000 + k)));
     looks.push((format!("{guard}× the sub-rays"), guard * sub_rays, 0x5EA7_1000));
     for (name, rays, seed) in looks {
@@ -1234,22 +1239,19 @@ pub fn headbox(
         };
         let (encoding, label) = &overrides.apply(&encoding);
         let (l, t_encode) = base.encode(encoding, max_iterations)?;
-        let (ev, t_eval) = base.evaluate(
-            &l,
-            &EvaluationOptions {
-                optics: Optics::Wave,
-                sub_rays: 12,
-                ..EvaluationOptions::population_only(population, Some(text.clone()))
-            },
-            &|_| {},
-        )?;
+        let evaluation = EvaluationOptions {
+            optics: Optics::Wave,
+            sub_rays: 12,
+            ..EvaluationOptions::population_only(population, Some(text.clone()))
+        };
+        let (ev, t_eval) = base.evaluate(&l, &evaluation, &|_| {})?;
         let p = ev.report.population.as_ref().expect("a population was asked for");
         if seat_kernel_draws > 0 {
             seat_kernels(
                 &base,
                 &l,
                 &reference,
-                population,
+                &evaluation,
                 seat_kernel_draws,
                 label,
                 &mut kernels_md,

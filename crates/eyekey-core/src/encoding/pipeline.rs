@@ -83,9 +83,14 @@ pub fn encode(
 struct DrawRank(bool, bool, std::cmp::Reverse<u32>, u32, std::cmp::Reverse<u32>);
 
 impl DrawRank {
+    /// The target reads and the check's seat held: a draw that may be confirmed.
+    fn reads_and_holds_the_seat(&self) -> bool {
+        self.0 && self.1
+    }
+
     fn of(c: &DrawCheck) -> Self {
         use std::cmp::Reverse;
-        let seat_held = c.people_read * 100 < c.people;
+        let seat_held = under_one_percent(c.people_read, c.people);
         Self(
             c.target_reads,
             seat_held,
@@ -106,20 +111,22 @@ struct KeepRank(bool, DrawRank);
 impl KeepRank {
     fn of(c: &DrawCheck) -> Self {
         Self(
-            c.confirm_people > 0 && c.confirm_read * 100 < c.confirm_people,
+            c.confirm_people > 0 && under_one_percent(c.confirm_read, c.confirm_people),
             DrawRank::of(c),
         )
     }
+}
+
+/// The seat held: fewer than 1 % of the people looked at read (the bound).
+fn under_one_percent(read: u32, people: u32) -> bool {
+    read * 100 < people
 }
 
 /// Whether a draw is worth confirming: its check held the seat (and the target reads), and, confirmed, it would
 /// be kept before `best`, the draw kept so far.
 fn needs_confirmation(check: &DrawCheck, best: Option<&DrawCheck>) -> bool {
     let rank = DrawRank::of(check);
-    if !(rank.0 && rank.1) {
-        return false;
-    }
-    best.is_none_or(|b| KeepRank(true, rank) > KeepRank::of(b))
+    rank.reads_and_holds_the_seat() && best.is_none_or(|b| KeepRank(true, rank) > KeepRank::of(b))
 }
 
 /// A second look at the seat for a draw whose check held it: [`DRAW_CONFIRM_PEOPLE`] fresh people sampled as the
@@ -1738,7 +1745,7 @@ mod tests {
             "{draws:?}"
         );
         // Only a draw whose check held the seat is confirmed, by 400 more people; the first such always is.
-        let held = |c: &DrawCheck| DrawRank::of(c).0 && DrawRank::of(c).1;
+        let held = |c: &DrawCheck| DrawRank::of(c).reads_and_holds_the_seat();
         assert!(
             draws.iter().all(|c| c.confirm_people == 0
                 || (held(c) && c.confirm_people == DRAW_CONFIRM_PEOPLE && c.confirm_read <= c.confirm_people)),

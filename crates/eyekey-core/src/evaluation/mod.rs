@@ -60,7 +60,7 @@ pub fn evaluate(
 ) -> Result<Evaluation, EvaluationError> {
     let topts = TransportOptions {
         sub_rays: options.sub_rays,
-        seed: options.seed ^ 0xE7A1,
+        seed: options.transport_seed(),
         ..Default::default()
     };
     let t_obs = Observer::new(display, target, EyePosition::default(), &topts, options.optics, cache)?;

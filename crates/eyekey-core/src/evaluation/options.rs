@@ -37,6 +37,11 @@ pub struct EvaluationOptions {
 }
 
 impl EvaluationOptions {
+    /// The seed of the evaluation's kernel draws (its own jitter seed, apart from the encoder's).
+    pub fn transport_seed(&self) -> u64 {
+        self.seed ^ 0xE7A1
+    }
+
     /// Only `population` people at the target's position (with the document's text, when known): no camera, key
     /// sensitivity or head movement; the other options at their defaults.
     pub fn population_only(population: u32, document_text: Option<crate::evaluation::DocumentText>) -> Self {
