@@ -230,8 +230,13 @@ impl Baseline {
         }
         for (k, r) in enc.solver.head_rounds.iter().enumerate() {
             let added: Vec<String> = r.added.iter().map(|[x, y]| format!("({x:.2}, {y:.2})")).collect();
+            let raised: Vec<String> = r
+                .raised
+                .iter()
+                .map(|p| format!("({:.2}, {:.2}) to {}", p.at[0], p.at[1], p.weight))
+                .collect();
             eprintln!(
-                "{label}: head-box round {}: the tracked target read at {} of {} positions; added {}",
+                "{label}: head-box round {}: the tracked target read at {} of {} positions; added {}{}",
                 k + 1,
                 r.read,
                 r.positions,
@@ -239,6 +244,11 @@ impl Baseline {
                     "none".to_string()
                 } else {
                     added.join(", ") + " mm"
+                },
+                if raised.is_empty() {
+                    String::new()
+                } else {
+                    format!("; weight raised at {}", raised.join(", "))
                 }
             );
         }

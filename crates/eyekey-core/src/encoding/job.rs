@@ -147,6 +147,20 @@ pub struct HeadRound {
     pub read: u32,
     /// Eye positions (x, y, mm from the seat) whose tracked eye joined the target's stacked positions.
     pub added: Vec<[f64; 2]>,
+    /// Stacked eye positions (x, y, mm) whose tracked eye still misread, their weight raised
+    /// (`HEAD_ROUND_WEIGHT_STEP`), with the weight each now has.
+    #[serde(default)]
+    pub raised: Vec<RaisedPosition>,
+}
+
+/// A stacked head-box position whose weight a round raised ([`HeadRound::raised`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct RaisedPosition {
+    /// x, y, mm from the seat.
+    pub at: [f64; 2],
+    /// The position's weight from now on, against the design position's 1.
+    pub weight: f64,
 }
 
 /// One bystander camera round ([`SolverSummary::bystander_rounds`]).

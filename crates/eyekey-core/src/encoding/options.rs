@@ -166,8 +166,9 @@ pub struct EncodeOptions {
     /// frames re-indexed, looks from rings of 1–5 mm around the seat (right, left, above, below; 20 positions)
     /// through a kernel draw of its own; up to [`HEAD_ROUND_MAX_ADDED`] positions where it does not read (the
     /// evaluation's judge, with `target_margin`), the most misread first, join the target's stacked positions as
-    /// the tracked eye there (the operator T·R, `TransportOptions::tracked`; weight `head_weight`), and the
-    /// solve runs again from its end.
+    /// the tracked eye there (the operator T·R, `TransportOptions::tracked`; weight `head_weight`); a stacked
+    /// position where it still misreads has its weight multiplied by [`HEAD_ROUND_WEIGHT_STEP`] (up to
+    /// [`HEAD_ROUND_MAX_WEIGHT`]); and the solve runs again from its end.
     #[cfg_attr(feature = "openapi", schema(maximum = 3))]
     pub head_rounds: u32,
     /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
@@ -292,6 +293,15 @@ pub const DRAW_CONFIRM_PEOPLE: u32 = 400;
 
 /// Stacked positions a head-box round adds at most (`head_rounds`).
 pub const HEAD_ROUND_MAX_ADDED: u32 = 4;
+
+/// A head-box round multiplies the weight of a stacked position whose tracked eye still misreads by this
+/// (`head_rounds`), up to [`HEAD_ROUND_MAX_WEIGHT`]: a position stacked at `head_weight` and misread after the
+/// solve is asked for the document again, harder, instead of being left as it is.
+pub const HEAD_ROUND_WEIGHT_STEP: f64 = 2.0;
+
+/// The weight a head-box round raises a stacked position to at most: the design position's own (or
+/// `head_weight`, if larger).
+pub const HEAD_ROUND_MAX_WEIGHT: f64 = 1.0;
 
 /// Ring positions a head-box round looks from (`head_rounds`): 1–5 mm, right, left, above and below.
 pub const HEAD_ROUND_POSITIONS: u32 = 20;
