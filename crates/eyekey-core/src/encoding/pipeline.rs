@@ -1698,7 +1698,10 @@ mod tests {
         if rounds.len() > 1 {
             assert!(rounds[1].read > first.read, "{rounds:?}");
         }
-        assert!(first.raised.is_empty(), "nothing is stacked before the first round: {rounds:?}");
+        assert!(
+            first.raised.is_empty(),
+            "nothing is stacked before the first round: {rounds:?}"
+        );
         // Not under geometric optics, where the tracked eye is not modelled.
         let mut geometric = spec.clone();
         geometric.options.optics = crate::physics::observer::Optics::Geometric;
