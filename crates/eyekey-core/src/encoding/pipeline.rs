@@ -199,13 +199,14 @@ fn check_draw(
         seed: o.seed ^ DRAW_CHECK_SEED,
         ..base_transport(o)
     };
-    let look = |person: &VisionProfile, eye: EyePosition| {
+    // An observer error names the target profile for the target's looks, the check itself for a fresh person's.
+    let look = |person: &VisionProfile, eye: EyePosition, field: &str| {
         if cancel.load(Ordering::Relaxed) {
             return Err(PipelineError::Cancelled);
         }
-        Observer::new(d, person, eye, &topts, o.optics, cache).map_err(|e| observer_error("target profile", e))
+        Observer::new(d, person, eye, &topts, o.optics, cache).map_err(|e| observer_error(field, e))
     };
-    let target = look(&spec.target, EyePosition::default())?;
+    let target = look(&spec.target, EyePosition::default(), "target profile")?;
     let reference = check_reference(spec, encoded.document_text.as_ref(), target.grid())?;
     let reads = |o: &Observer, l: &[f32]| reference.score_observer("check", o, l).0.readable;
     let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 || o.head_rounds > 0 {
@@ -216,7 +217,7 @@ fn check_draw(
     let ring_read = ring
         .par_iter()
         .map(|&eye| {
-            let moved = look(&spec.target, eye)?;
+            let moved = look(&spec.target, eye, "target profile")?;
             Ok(u32::from(reads(&moved, &crate::physics::tracking::retarget(d, l, eye))))
         })
         .collect::<Result<Vec<_>, PipelineError>>()?
@@ -245,7 +246,12 @@ fn check_draw(
     }
     let people_read = people
         .par_iter()
-        .map(|p| Ok(u32::from(reads(&look(p, EyePosition::default())?, l))))
+        .map(|p| {
+            Ok(u32::from(reads(
+                &look(p, EyePosition::default(), "the draws' check")?,
+                l,
+            )))
+        })
         .collect::<Result<Vec<_>, PipelineError>>()?
         .into_iter()
         .sum();
@@ -652,11 +658,12 @@ impl Cast {
             let glyphs = attacker.as_ref().filter(|_| o.leak_glyphs);
             LeakPatterns::new(&spec.document, g.width, g.height, glyphs)
         });
+        let moved = head_box_observers(spec, cache)?;
         let mut cast = Self {
             leak,
             attacker,
-            moved: head_box_observers(spec, cache)?,
-            moved_weights: Vec::new(),
+            moved_weights: vec![o.head_weight; moved.len()],
+            moved,
             head_added: Vec::new(),
             others: Vec::new(),
             decoy_objectives: Vec::new(),
@@ -665,7 +672,6 @@ impl Cast {
             target_objective,
             energy,
         };
-        cast.moved_weights = vec![o.head_weight; cast.moved.len()];
         if o.method != Method::Diffmax {
             cast.add_people(spec, cache, progress, cancel)?;
             if o.camera_decoys {
