@@ -1666,6 +1666,25 @@ mod tests {
         assert_eq!(encoded.solver.observers, 1 + rounds[0].added + rounds[1].added);
     }
 
+    /// A PIN job on lenslets whose near-pupil decoys beside the seat take the reading from a tracked 4 mm target,
+    /// solved 60 iterations a round under wave optics, with `rounds` head-box rounds at `weight`.
+    fn head_round_job(rounds: u32, weight: f64) -> JobSpec {
+        let mut spec = pin_job_on_lenslets();
+        spec.target.pupil_diameter_mm = 4.0;
+        spec.options = EncodeOptions {
+            max_iterations: 60,
+            ensure_target_reads: false,
+            head_rounds: rounds,
+            head_weight: weight,
+            near_pupil_decoys: 2,
+            near_pupil_ring_mm: 0.8,
+            decoy_weight: Some(0.3),
+            optics: crate::physics::observer::Optics::Wave,
+            ..spec.options
+        };
+        spec
+    }
+
     #[test]
     fn a_head_box_round_stacks_the_tracked_target_where_it_misreads() {
         // Decoys beside the seat take the reading from a tracked target at most of the 20 ring positions; the
@@ -1673,18 +1692,7 @@ mod tests {
         // read at more positions (measured: 5, then 15 of 20).
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let mut spec = pin_job_on_lenslets();
-        spec.target.pupil_diameter_mm = 4.0;
-        spec.options = EncodeOptions {
-            max_iterations: 60,
-            ensure_target_reads: false,
-            head_rounds: 2,
-            near_pupil_decoys: 2,
-            near_pupil_ring_mm: 0.8,
-            decoy_weight: Some(0.3),
-            optics: crate::physics::observer::Optics::Wave,
-            ..spec.options
-        };
+        let spec = head_round_job(2, DEFAULT_HEAD_WEIGHT);
         let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         let rounds = &encoded.solver.head_rounds;
         assert!(!rounds.is_empty() && rounds.iter().all(|r| r.positions == HEAD_ROUND_POSITIONS));
@@ -1725,19 +1733,7 @@ mod tests {
         // (measured: 5, 6, 7 of 20 read; 4 then 7 raised).
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let mut spec = pin_job_on_lenslets();
-        spec.target.pupil_diameter_mm = 4.0;
-        spec.options = EncodeOptions {
-            max_iterations: 60,
-            ensure_target_reads: false,
-            head_rounds: 3,
-            head_weight: 0.01,
-            near_pupil_decoys: 2,
-            near_pupil_ring_mm: 0.8,
-            decoy_weight: Some(0.3),
-            optics: crate::physics::observer::Optics::Wave,
-            ..spec.options
-        };
+        let spec = head_round_job(3, 0.01);
         let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         let rounds = &encoded.solver.head_rounds;
         assert_eq!(rounds.len(), 3, "{rounds:?}");
