@@ -172,6 +172,9 @@ pub fn spectra_bytes(display: &DisplayGeometry, options: &EncodeOptions) -> u64 
 /// `GUARD_SUB_RAYS` times the rays); up to the process's bound on cached bundles, plus one of the guard's being
 /// traced beyond it.
 pub fn bundle_bytes(display: &DisplayGeometry, options: &EncodeOptions, observers: u64) -> u64 {
+    if options.optics != Optics::Wave {
+        return 0;
+    }
     let q = TransportOptions::default().wavelengths_per_band.max(1);
     let wavelengths: Vec<f64> = display
         .projectors
@@ -188,7 +191,7 @@ pub fn bundle_bytes(display: &DisplayGeometry, options: &EncodeOptions, observer
     let pupils = (1..=widest)
         .filter(|k| f64::from(*k) * SAMPLING_PUPIL_STEP_MM >= from.max(PUPIL_RANGE_MM.0 / 2.0))
         .count() as u64;
-    if options.optics != Optics::Wave || pupils == 0 {
+    if pupils == 0 {
         return 0;
     }
     let per_ray = match display.aperture {

@@ -151,20 +151,51 @@ fn confirm_draw(
         draw.seed.wrapping_add(DRAW_CONFIRM_PEOPLE_SEED),
         Default::default(),
     );
-    let read: u32 = people
+    let read = readers_at_seat(
+        spec,
+        &people,
+        &topts,
+        &reference,
+        l,
+        "the draws' confirmation",
+        cache,
+        cancel,
+    )?;
+    Ok((read, DRAW_CONFIRM_PEOPLE))
+}
+
+/// How many of `people` at the seat read `l`, each through kernels drawn with `topts` and judged by `reference`
+/// (the draws' check and confirmation); an observer error names `field`.
+#[allow(clippy::too_many_arguments)]
+fn readers_at_seat(
+    spec: &JobSpec,
+    people: &[VisionProfile],
+    topts: &TransportOptions,
+    reference: &Reference,
+    l: &[f32],
+    field: &str,
+    cache: &TransportCache,
+    cancel: &AtomicBool,
+) -> Result<u32, PipelineError> {
+    let reads = people
         .par_iter()
         .map(|p| {
             if cancel.load(Ordering::Relaxed) {
                 return Err(PipelineError::Cancelled);
             }
-            let o = Observer::new(d, p, EyePosition::default(), &topts, o.optics, cache)
-                .map_err(|e| observer_error("the draws' confirmation", e))?;
-            Ok(u32::from(reference.score_observer("confirm", &o, l).0.readable))
+            let o = Observer::new(
+                &spec.display,
+                p,
+                EyePosition::default(),
+                topts,
+                spec.options.optics,
+                cache,
+            )
+            .map_err(|e| observer_error(field, e))?;
+            Ok(u32::from(reference.score_observer(field, &o, l).0.readable))
         })
-        .collect::<Result<Vec<_>, PipelineError>>()?
-        .into_iter()
-        .sum();
-    Ok((read, DRAW_CONFIRM_PEOPLE))
+        .collect::<Result<Vec<_>, PipelineError>>()?;
+    Ok(reads.into_iter().sum())
 }
 
 /// The check's judge on the target's grid: the legibility reference, with the known-font attacker where the
@@ -199,14 +230,13 @@ fn check_draw(
         seed: o.seed ^ DRAW_CHECK_SEED,
         ..base_transport(o)
     };
-    // An observer error names the target profile for the target's looks, the check itself for a fresh person's.
-    let look = |person: &VisionProfile, eye: EyePosition, field: &str| {
+    let look = |eye: EyePosition| {
         if cancel.load(Ordering::Relaxed) {
             return Err(PipelineError::Cancelled);
         }
-        Observer::new(d, person, eye, &topts, o.optics, cache).map_err(|e| observer_error(field, e))
+        Observer::new(d, &spec.target, eye, &topts, o.optics, cache).map_err(|e| observer_error("target profile", e))
     };
-    let target = look(&spec.target, EyePosition::default(), "target profile")?;
+    let target = look(EyePosition::default())?;
     let reference = check_reference(spec, encoded.document_text.as_ref(), target.grid())?;
     let reads = |o: &Observer, l: &[f32]| reference.score_observer("check", o, l).0.readable;
     let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 || o.head_rounds > 0 {
@@ -217,7 +247,7 @@ fn check_draw(
     let ring_read = ring
         .par_iter()
         .map(|&eye| {
-            let moved = look(&spec.target, eye, "target profile")?;
+            let moved = look(eye)?;
             Ok(u32::from(reads(&moved, &crate::physics::tracking::retarget(d, l, eye))))
         })
         .collect::<Result<Vec<_>, PipelineError>>()?
@@ -244,17 +274,7 @@ fn check_draw(
             Default::default(),
         ));
     }
-    let people_read = people
-        .par_iter()
-        .map(|p| {
-            Ok(u32::from(reads(
-                &look(p, EyePosition::default(), "the draws' check")?,
-                l,
-            )))
-        })
-        .collect::<Result<Vec<_>, PipelineError>>()?
-        .into_iter()
-        .sum();
+    let people_read = readers_at_seat(spec, &people, &topts, &reference, l, "the draws' check", cache, cancel)?;
     let cameras = camera_scan(
         spec,
         cache,
