@@ -57,6 +57,8 @@ struct Encoding {
     bystander_rounds: u32,
     /// Head-box rounds (`head_rounds`).
     head_rounds: u32,
+    /// The weight head-box rounds raise a stacked position to at most (`head_round_max_weight`).
+    head_round_max_weight: f64,
     /// Adaptive decoy rounds (`adaptive_rounds`, with the encoder's default candidates).
     adaptive_rounds: u32,
     /// Draws tried, the best by the encoder's own checks kept (`draws`).
@@ -84,6 +86,7 @@ const BASELINE: Encoding = Encoding {
     text_hint: false,
     bystander_rounds: 0,
     head_rounds: 0,
+    head_round_max_weight: eyekey_core::encoding::options::HEAD_ROUND_MAX_WEIGHT,
     adaptive_rounds: 0,
     draws: 1,
 };
@@ -175,6 +178,7 @@ impl Baseline {
                 ensure_target_reads: e.guard,
                 bystander_rounds: e.bystander_rounds,
                 head_rounds: e.head_rounds,
+                head_round_max_weight: e.head_round_max_weight,
                 adaptive_rounds: e.adaptive_rounds,
                 draws: e.draws,
                 // The guard judges the target as the job would, with the slip's text hint; bystander rounds and the
@@ -709,6 +713,10 @@ pub struct Overrides {
     /// by the slip's known-font attacker, the leak penalty as the row has it.
     #[arg(long)]
     pub head_rounds: Option<u32>,
+    /// Every encoding's head-box rounds raise a stacked position's weight to this at most
+    /// (`head_round_max_weight`) instead of the design position's 1.
+    #[arg(long)]
+    pub head_round_max_weight: Option<f64>,
     /// Every encoding with this many adaptive decoy rounds (`adaptive_rounds`): fresh people at the seat who
     /// still read join as decoys; judged by the slip's known-font attacker.
     #[arg(long)]
@@ -752,6 +760,10 @@ impl Overrides {
         if let Some(n) = self.head_rounds {
             e.head_rounds = n;
             label += &format!(", {n} head-box round(s)");
+        }
+        if let Some(w) = self.head_round_max_weight {
+            e.head_round_max_weight = w;
+            label += &format!(", stacked positions raised to weight {w} at most");
         }
         if let Some(n) = self.adaptive_rounds {
             e.adaptive_rounds = n;

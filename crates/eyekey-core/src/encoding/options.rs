@@ -168,9 +168,15 @@ pub struct EncodeOptions {
     /// evaluation's judge, with `target_margin`), the most misread first, join the target's stacked positions as
     /// the tracked eye there (the operator T·R, `TransportOptions::tracked`; weight `head_weight`); a stacked
     /// position where it still misreads has its weight multiplied by [`HEAD_ROUND_WEIGHT_STEP`] (up to
-    /// [`HEAD_ROUND_MAX_WEIGHT`]); and the solve runs again from its end.
+    /// `head_round_max_weight`); and the solve runs again from its end.
     #[cfg_attr(feature = "openapi", schema(maximum = 3))]
     pub head_rounds: u32,
+    /// The weight a head-box round raises a stacked position to at most (`head_weight` if that is larger),
+    /// relative to the design position's 1: the design position's own by default ([`HEAD_ROUND_MAX_WEIGHT`]).
+    /// Lower, the stacked positions ask less of the frames against the decoys at the seat (docs/experiments.md
+    /// §2c).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 4.0))]
+    pub head_round_max_weight: f64,
     /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
     /// focus and aperture of [`BystanderOptions::default`](crate::evaluation::BystanderOptions), behind the
     /// sensor's R, G and B and behind each band's filter) looks from `bystander_scan_mm` to the right, left,
@@ -254,6 +260,7 @@ impl Default for EncodeOptions {
             camera_decoy_extra_apertures_mm: vec![],
             camera_decoy_ring_mm: 0.0,
             head_rounds: 0,
+            head_round_max_weight: HEAD_ROUND_MAX_WEIGHT,
             bystander_rounds: 0,
             bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
             bystander_decoys_per_round: 8,
@@ -295,12 +302,12 @@ pub const DRAW_CONFIRM_PEOPLE: u32 = 400;
 pub const HEAD_ROUND_MAX_ADDED: u32 = 4;
 
 /// A head-box round multiplies the weight of a stacked position whose tracked eye still misreads by this
-/// (`head_rounds`), up to [`HEAD_ROUND_MAX_WEIGHT`]: a position stacked at `head_weight` and misread after the
+/// (`head_rounds`), up to `head_round_max_weight`: a position stacked at `head_weight` and misread after the
 /// solve is asked for the document again, harder, instead of being left as it is.
 pub const HEAD_ROUND_WEIGHT_STEP: f64 = 2.0;
 
-/// The weight a head-box round raises a stacked position to at most: the design position's own (or
-/// `head_weight`, if larger).
+/// The weight a head-box round raises a stacked position to at most by default (`head_round_max_weight`): the
+/// design position's own (or `head_weight`, if larger).
 pub const HEAD_ROUND_MAX_WEIGHT: f64 = 1.0;
 
 /// Ring positions a head-box round looks from (`head_rounds`): 1–5 mm, right, left, above and below.
@@ -404,6 +411,12 @@ impl EncodeOptions {
         }
         if !(self.head_weight.is_finite() && (0.0..=4.0).contains(&self.head_weight)) {
             return bad("head_weight", format!("must be within 0..=4, got {}", self.head_weight));
+        }
+        if !(self.head_round_max_weight.is_finite() && (0.0..=4.0).contains(&self.head_round_max_weight)) {
+            return bad(
+                "head_round_max_weight",
+                format!("must be within 0..=4, got {}", self.head_round_max_weight),
+            );
         }
         if !(3..=16).contains(&self.head_positions) {
             return bad(
@@ -598,6 +611,26 @@ mod tests {
         for w in [0.0, 0.4, 4.0] {
             let o = EncodeOptions {
                 head_weight: w,
+                ..Default::default()
+            };
+            assert!(o.validate().is_ok(), "{w}");
+        }
+    }
+
+    #[test]
+    fn a_head_round_cap_out_of_range_is_refused_by_name_and_the_seat_s_weight_is_the_default() {
+        assert_eq!(EncodeOptions::default().head_round_max_weight, 1.0);
+        for w in [-0.01, 4.01, f64::NAN, f64::INFINITY] {
+            let o = EncodeOptions {
+                head_round_max_weight: w,
+                ..Default::default()
+            };
+            let e = o.validate().unwrap_err().to_string();
+            assert!(e.contains("head_round_max_weight"), "{e}");
+        }
+        for w in [0.0, 0.5, 4.0] {
+            let o = EncodeOptions {
+                head_round_max_weight: w,
                 ..Default::default()
             };
             assert!(o.validate().is_ok(), "{w}");

@@ -850,7 +850,7 @@ impl Cast {
             })
             .collect::<Result<_, PipelineError>>()?;
         // A stacked position the tracked eye still misreads is asked again, harder (up to the cap).
-        let cap = HEAD_ROUND_MAX_WEIGHT.max(o.head_weight);
+        let cap = o.head_round_max_weight.max(o.head_weight);
         let stacked_from = self.moved.len() - self.head_added.len();
         let mut raised = Vec::new();
         for (eye, (_, reads)) in looks.iter().zip(&seen) {
@@ -1749,26 +1749,33 @@ mod tests {
     fn a_head_box_round_raises_the_weight_of_a_stacked_position_that_still_misreads() {
         // Stacked at a hundredth of the seat's weight, the positions the first round adds hardly count and the
         // tracked eye still misreads there after the solve: the next round doubles their weight (and only
-        // theirs), the round after doubles again those still misread, and the solve runs again after each
-        // (measured: 5, 6, 7 of 20 read; 4 then 7 raised).
+        // theirs), the round after doubles again those still misread, up to the cap of 0.03 asked here, and the
+        // solve runs again after each (measured: 5, 6, 7 of 20 read; 4 then 7 raised, 4 of the 7 to the cap).
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
-        let spec = head_round_job(3, 0.01);
+        let mut spec = head_round_job(3, 0.01);
+        let cap = 0.03;
+        spec.options.head_round_max_weight = cap;
         let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         let rounds = &encoded.solver.head_rounds;
         assert_eq!(rounds.len(), 3, "{rounds:?}");
         assert!(rounds[0].raised.is_empty() && !rounds[0].added.is_empty(), "{rounds:?}");
         assert!(!rounds[1].raised.is_empty(), "{rounds:?}");
         let mut weights: Vec<([f64; 2], f64)> = Vec::new();
+        let mut capped = 0;
         for r in rounds {
             for p in &r.raised {
                 let had = weights.iter_mut().find(|(at, _)| *at == p.at);
                 let had = had.unwrap_or_else(|| panic!("{:?} raised but never stacked: {rounds:?}", p.at));
-                assert!((p.weight - had.1 * HEAD_ROUND_WEIGHT_STEP).abs() < 1e-12, "{rounds:?}");
+                let doubled = had.1 * HEAD_ROUND_WEIGHT_STEP;
+                assert!((p.weight - doubled.min(cap)).abs() < 1e-12, "{rounds:?}");
+                capped += usize::from(doubled > cap);
                 had.1 = p.weight;
             }
             weights.extend(r.added.iter().map(|&at| (at, 0.01)));
         }
+        assert!(capped > 0, "no raise reached the cap: {rounds:?}");
+        assert!(weights.iter().all(|w| w.1 <= cap + 1e-12), "{weights:?}");
         // Each round after the first either stacked or raised something, so every round's solve ran: three
         // rounds, four solves.
         assert_eq!(encoded.solver.solves.len(), 4, "{:?}", encoded.solver.solves);
