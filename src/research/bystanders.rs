@@ -256,6 +256,25 @@ impl Baseline {
                 }
             );
         }
+        if enc.solver.solves.len() > 1 {
+            let solves: Vec<String> = enc
+                .solver
+                .solves
+                .iter()
+                .map(|s| {
+                    format!(
+                        "{} ({}, decoys × {:.3})",
+                        s.iterations,
+                        s.termination.as_str(),
+                        s.decoy_weight_scale
+                    )
+                })
+                .collect();
+            eprintln!(
+                "{label}: the kept frames' solves, iterations each: {}",
+                solves.join(", ")
+            );
+        }
         for (k, r) in enc.solver.bystander_rounds.iter().enumerate() {
             eprintln!(
                 "{label}: bystander round {}: {} of {} camera settings read, best known-font margin {:?}, {} added as decoys",

@@ -387,7 +387,10 @@ fn encode_draw(
     for round in 0..=rounds {
         let done_before = summary.iterations as f64;
         let report = |p: Progress| progress(0.15 + 0.7 * (done_before + p.iteration as f64) / total_iterations);
-        let result = solve_round(spec, &cast, x, tied, 1.0, None, report, cancel)?;
+        // After a round changed the objective, the solve goes on from the last one's end for at least
+        // `ROUND_SOLVE_MIN_ITERATIONS` before it may stop as converged.
+        let min_iterations = if round == 0 { 0 } else { ROUND_SOLVE_MIN_ITERATIONS };
+        let result = solve_round(spec, &cast, x, tied, 1.0, min_iterations, None, report, cancel)?;
         absorb(&mut summary, &result, 1.0);
         x = result.x;
         if round == rounds {
@@ -440,7 +443,7 @@ fn encode_draw(
         at += span;
         let report = |p: Progress| progress(from + span * p.iteration as f64 / o.max_iterations as f64);
         // From the heavier solve's end: the same problem with lighter decoys, whose solution is near.
-        let result = solve_round(spec, &cast, x.clone(), tied, scale, Some(&clearly), report, cancel)?;
+        let result = solve_round(spec, &cast, x.clone(), tied, scale, 0, Some(&clearly), report, cancel)?;
         absorb(&mut summary, &result, scale);
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
@@ -454,7 +457,7 @@ fn encode_draw(
     if o.ensure_target_reads && summary.target_reads && scale < 1.0 {
         let between = scale * std::f64::consts::SQRT_2;
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
-        let result = solve_round(spec, &cast, x, tied, between, Some(&clearly), report, cancel)?;
+        let result = solve_round(spec, &cast, x, tied, between, 0, Some(&clearly), report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
         let reads = reads_end(result.termination, &l_between);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
@@ -1212,7 +1215,8 @@ fn expand_tied(d: &DisplayGeometry, x: &[f32], tied: bool) -> Vec<f32> {
 type Judge<'a> = &'a dyn Fn(&[f32]) -> bool;
 
 /// One solve of the encoder's objective (Eq. 14, with Eq. 16's terms for difference maximisation) from `x`,
-/// stopped early at a checkpoint where `stop_when` judges the light field so far (`GUARD_EARLY_EVERY`).
+/// stopped early at a checkpoint where `stop_when` judges the light field so far (`GUARD_EARLY_EVERY`), and not
+/// stopped as converged before `min_iterations`.
 #[allow(clippy::too_many_arguments)]
 fn solve_round(
     spec: &JobSpec,
@@ -1220,6 +1224,7 @@ fn solve_round(
     x: Vec<f32>,
     tied: bool,
     decoy_scale: f64,
+    min_iterations: u32,
     stop_when: Option<Judge<'_>>,
     mut report: impl FnMut(Progress),
     cancel: &AtomicBool,
@@ -1270,6 +1275,7 @@ fn solve_round(
     let solver_opts = SolverOptions {
         max_iterations: o.max_iterations,
         tolerance: o.tolerance,
+        min_iterations,
         ..Default::default()
     };
     let l_max = d.l_max as f32;
