@@ -313,8 +313,8 @@ pub const HEAD_ROUND_MAX_WEIGHT: f64 = 1.0;
 /// The solve after an adaptive, head-box or bystander round runs at least this many iterations (or
 /// `max_iterations`, if fewer) before it may stop as converged ([`SolverOptions::min_iterations`](crate::encoding::solver::SolverOptions)):
 /// it starts from the last solve's end, and where the round changed little (a stacked position raised from 0.5
-/// to 0.75) the tolerance test stopped it after 6 iterations, its frames the same in every figure as without the
-/// raise (docs/experiments.md §2c).
+/// to 0.75) the tolerance test stopped it after 6 iterations, the target's head-box legibilities the same to two
+/// decimals as without the raise (docs/experiments.md §2c).
 pub const ROUND_SOLVE_MIN_ITERATIONS: u32 = 60;
 
 /// Ring positions a head-box round looks from (`head_rounds`): 1–5 mm, right, left, above and below.
