@@ -604,43 +604,42 @@ mod tests {
         assert_eq!(EncodeOptions::default().head_rounds, 0, "off by default");
     }
 
+    /// Options with one weight set by `set` are refused, naming `field`, at each of `refused`, and accepted at
+    /// each of `accepted`.
+    fn weight_bounds(set: fn(&mut EncodeOptions, f64), field: &str, refused: &[f64], accepted: &[f64]) {
+        let with = |w: f64| {
+            let mut o = EncodeOptions::default();
+            set(&mut o, w);
+            o
+        };
+        for &w in refused {
+            let e = with(w).validate().unwrap_err().to_string();
+            assert!(e.contains(field), "{w}: {e}");
+        }
+        for &w in accepted {
+            assert!(with(w).validate().is_ok(), "{field} {w}");
+        }
+    }
+
     #[test]
     fn a_head_weight_out_of_range_is_refused_by_name_and_a_quarter_is_the_default() {
         assert_eq!(EncodeOptions::default().head_weight, 0.25);
-        for w in [-0.01, 4.01, f64::NAN] {
-            let o = EncodeOptions {
-                head_weight: w,
-                ..Default::default()
-            };
-            let e = o.validate().unwrap_err().to_string();
-            assert!(e.contains("head_weight"), "{e}");
-        }
-        for w in [0.0, 0.4, 4.0] {
-            let o = EncodeOptions {
-                head_weight: w,
-                ..Default::default()
-            };
-            assert!(o.validate().is_ok(), "{w}");
-        }
+        weight_bounds(
+            |o, w| o.head_weight = w,
+            "head_weight",
+            &[-0.01, 4.01, f64::NAN],
+            &[0.0, 0.4, 4.0],
+        );
     }
 
     #[test]
     fn a_head_round_cap_out_of_range_is_refused_by_name_and_the_seat_s_weight_is_the_default() {
         assert_eq!(EncodeOptions::default().head_round_max_weight, 1.0);
-        for w in [-0.01, 4.01, f64::NAN, f64::INFINITY] {
-            let o = EncodeOptions {
-                head_round_max_weight: w,
-                ..Default::default()
-            };
-            let e = o.validate().unwrap_err().to_string();
-            assert!(e.contains("head_round_max_weight"), "{e}");
-        }
-        for w in [0.0, 0.5, 4.0] {
-            let o = EncodeOptions {
-                head_round_max_weight: w,
-                ..Default::default()
-            };
-            assert!(o.validate().is_ok(), "{w}");
-        }
+        weight_bounds(
+            |o, w| o.head_round_max_weight = w,
+            "head_round_max_weight",
+            &[-0.01, 4.01, f64::NAN, f64::INFINITY],
+            &[0.0, 0.5, 4.0],
+        );
     }
 }
