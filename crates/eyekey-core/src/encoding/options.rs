@@ -416,14 +416,13 @@ impl EncodeOptions {
                 format!("must be within 0..=20 mm, got {}", self.head_radius_mm),
             );
         }
-        if !(self.head_weight.is_finite() && (0.0..=4.0).contains(&self.head_weight)) {
-            return bad("head_weight", format!("must be within 0..=4, got {}", self.head_weight));
-        }
-        if !(self.head_round_max_weight.is_finite() && (0.0..=4.0).contains(&self.head_round_max_weight)) {
-            return bad(
-                "head_round_max_weight",
-                format!("must be within 0..=4, got {}", self.head_round_max_weight),
-            );
+        for (name, v) in [
+            ("head_weight", self.head_weight),
+            ("head_round_max_weight", self.head_round_max_weight),
+        ] {
+            if !(v.is_finite() && (0.0..=4.0).contains(&v)) {
+                return bad(name, format!("must be within 0..=4, got {v}"));
+            }
         }
         if !(3..=16).contains(&self.head_positions) {
             return bad(
