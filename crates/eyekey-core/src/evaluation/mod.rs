@@ -187,20 +187,36 @@ impl Evaluator<'_> {
         let people = sample_population(options.population as usize, options.seed, SamplingScope::default());
         let mut scores = Vec::with_capacity(people.len());
         let mut kept: Vec<(usize, RgbImage)> = Vec::new();
-        for (k, p) in people.iter().enumerate() {
+        // A few people at once, each building their own kernels: the serial parts of one person's build (its
+        // pupil table, its spectra's set-up, the judging) leave a core idle that another person's build fills.
+        // Scores and pictures are then taken in the people's order, as one at a time would.
+        let at_once = 2 * rayon::current_num_threads().max(1);
+        for (c, chunk) in people.chunks(at_once).enumerate() {
             self.check()?;
-            let o = self.observer(p, EyePosition::default())?;
-            let (s, pic) = self.reference.score_observer(&format!("person_{k}"), &o, self.l);
-            if (k as u32) < options.saved_population_views {
-                kept.push((k, pic.clone()));
+            let first = c * at_once;
+            let judged = chunk
+                .par_iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let o = self.observer(p, EyePosition::default())?;
+                    Ok(self
+                        .reference
+                        .score_observer(&format!("person_{}", first + i), &o, self.l))
+                })
+                .collect::<Result<Vec<_>, EvaluationError>>()?;
+            for (i, (s, pic)) in judged.into_iter().enumerate() {
+                let k = first + i;
+                if (k as u32) < options.saved_population_views {
+                    kept.push((k, pic.clone()));
+                }
+                let worst_so_far = scores.iter().all(|w: &ViewScore| s.legibility > w.legibility);
+                if worst_so_far {
+                    kept.retain(|(i, _)| *i != usize::MAX);
+                    kept.push((usize::MAX, pic));
+                }
+                scores.push(s);
             }
-            let worst_so_far = scores.iter().all(|w: &ViewScore| s.legibility > w.legibility);
-            if worst_so_far {
-                kept.retain(|(i, _)| *i != usize::MAX);
-                kept.push((usize::MAX, pic));
-            }
-            scores.push(s);
-            progress((k + 1) as f64 / people.len() as f64);
+            progress((first + chunk.len()) as f64 / people.len() as f64);
         }
         for (k, pic) in kept {
             let name = if k == usize::MAX {
@@ -574,6 +590,75 @@ mod tests {
                 assert!(p.relative_light < 0.01, "{p:#?}");
             }
         }
+    }
+
+    #[test]
+    fn the_population_is_judged_person_by_person_in_its_order_whatever_how_many_are_built_at_once() {
+        // The population's people are built a few at a time; each score, the first views kept and the most
+        // legible view must be those of judging each person alone, in the people's order. Seven people (not a
+        // multiple of the number built at once) look at a plain image, which each reads with their own
+        // legibility.
+        let display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        let document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
+        let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        let options = EvaluationOptions {
+            population: 7,
+            saved_population_views: 2,
+            sub_rays: 4,
+            key_directions: 0,
+            head_offsets_mm: vec![],
+            camera_focus_d: vec![],
+            ..Default::default()
+        };
+        let cache = TransportCache::default();
+        let ev = evaluate(
+            &display,
+            &l,
+            &document,
+            0.8,
+            &VisionProfile::perfect(),
+            &[],
+            &options,
+            &cache,
+            &|_| {},
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        let people = sample_population(7, options.seed, SamplingScope::default());
+        let topts = TransportOptions {
+            sub_rays: options.sub_rays,
+            seed: options.transport_seed(),
+            ..Default::default()
+        };
+        let fresh = TransportCache::default();
+        let (w, h) = (ev.pictures[0].1.width(), ev.pictures[0].1.height());
+        let reference = Reference::new(&document, w, h, 0.8, options.threshold);
+        let alone: Vec<(ViewScore, RgbImage)> = people
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let o = Observer::new(&display, p, EyePosition::default(), &topts, options.optics, &fresh).unwrap();
+                reference.score_observer(&format!("person_{k}"), &o, &l)
+            })
+            .collect();
+        let report = ev.report.population.as_ref().unwrap();
+        let legibility: Vec<f64> = report.people.iter().map(|s| s.legibility).collect();
+        let expected: Vec<f64> = alone.iter().map(|(s, _)| s.legibility).collect();
+        assert_eq!(legibility, expected);
+        let labels: Vec<&str> = report.people.iter().map(|s| s.label.as_str()).collect();
+        assert_eq!(labels, (0..7).map(|k| format!("person_{k}")).collect::<Vec<_>>());
+        // The people do not all read alike, so the most legible view names one of them.
+        let most = (0..7).fold(0, |m, k| if expected[k] > expected[m] { k } else { m });
+        assert!(expected.iter().any(|v| *v < expected[most]), "{expected:?}");
+        let picture = |name: &str| &ev.pictures.iter().find(|(n, _)| n == name).unwrap().1;
+        assert_eq!(picture("person_0.png"), &alone[0].1);
+        assert_eq!(picture("person_1.png"), &alone[1].1);
+        assert!(ev.pictures.iter().all(|(n, _)| n != "person_2.png"));
+        assert_eq!(picture("population_worst.png"), &alone[most].1);
     }
 
     #[test]
