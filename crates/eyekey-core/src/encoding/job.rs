@@ -185,7 +185,8 @@ pub struct SolveStep {
     pub decoy_weight_scale: f64,
     /// Its iterations.
     pub iterations: u32,
-    /// Why it stopped: `stopped` where the target guard found the target reading its iterate clearly.
+    /// Why it stopped: `stopped` where the target guard found the target reading its iterate clearly
+    /// (`target_reads` true), or gave the solve up, the target's reading out of its reach (`target_reads` false).
     pub termination: Termination,
     /// Whether the target read its end, where it was judged (an adaptive round before the last is not).
     pub target_reads: Option<bool>,

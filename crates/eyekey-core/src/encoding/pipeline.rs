@@ -358,6 +358,9 @@ fn encode_draw(
         o.adaptive_rounds.max(o.bystander_rounds).max(o.head_rounds)
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
+    // Whether the target guard may follow the first solve with lighter ones (`ensure_target_reads`).
+    let has_decoys = !cast.others.is_empty();
+    let guarded = o.ensure_target_reads && has_decoys;
     let g = cast.target.grid();
     // The evaluation's judge: the known-font attacker where the text is known (adaptive rounds rank candidates
     // by legibility alone).
@@ -390,7 +393,12 @@ fn encode_draw(
         // After a round changed the objective, the solve goes on from the last one's end for at least
         // `ROUND_SOLVE_MIN_ITERATIONS` before it may stop as converged.
         let min_iterations = if round == 0 { 0 } else { ROUND_SOLVE_MIN_ITERATIONS };
-        let result = solve_round(spec, &cast, x, tied, 1.0, min_iterations, None, report, cancel)?;
+        // Without rounds, a first solve whose end the target will not read is followed by the guard's lighter
+        // ones: it gives up where the target's reading is out of reach (`GuardJudge`).
+        let first = GuardJudge::new(&cast, &reference, o, false, rounds == 0 && guarded);
+        let judge = |k: u32, l: &[f32]| first.stop(k, l);
+        let give_up = first.gives_up.then_some(&judge as Judge);
+        let result = solve_round(spec, &cast, x, tied, 1.0, min_iterations, give_up, report, cancel)?;
         absorb(&mut summary, &result, 1.0);
         x = result.x;
         if round == rounds {
@@ -422,14 +430,19 @@ fn encode_draw(
     summary.target_reads = reads;
     judged(&mut summary, reads);
     // A lighter solve starts from the heavier one's end; where the target already reads it clearly at a
-    // checkpoint, it stops there (`GUARD_EARLY_EVERY`, `GUARD_EARLY_MARGIN`).
-    let early_margin = o.target_margin.max(GUARD_EARLY_MARGIN);
-    let clearly = |l: &[f32]| cast.target_reads(&reference, l, early_margin);
-    // Whether the target reads a lighter solve's end: stopped, it read clearly at the checkpoint.
-    let reads_end =
-        |how: Termination, l: &[f32]| how == Termination::Stopped || cast.target_reads(&reference, l, o.target_margin);
+    // checkpoint, it stops there (`GUARD_EARLY_EVERY`, `GUARD_EARLY_MARGIN`); where a solve after it would follow
+    // a misread end, it gives up where the target's reading is out of reach (`GuardJudge`).
+    let judges = [false, true].map(|gives_up| GuardJudge::new(&cast, &reference, o, true, gives_up));
+    // Whether the target reads a lighter solve's end: stopped, it read clearly at the checkpoint, unless it gave
+    // up.
+    let reads_end = |judge: &GuardJudge, how: Termination, l: &[f32]| {
+        if how == Termination::Stopped {
+            !judge.gave_up.get()
+        } else {
+            cast.target_reads(&reference, l, o.target_margin)
+        }
+    };
     // The target's reading comes first: lighter decoys until it reads (`ensure_target_reads`).
-    let has_decoys = !cast.others.is_empty();
     let mut scale = 1.0;
     // Progress so far; each further solve covers half of what is left of the solve's span (up to 0.85).
     let mut at = (0.15 + 0.7 * summary.iterations as f64 / total_iterations).min(0.85);
@@ -437,18 +450,22 @@ fn encode_draw(
     // that a heavier start reaches the weights a lighter one does.
     let start = o.decoy_weight_on(&spec.display);
     let above_floor = |scale: f64| scale > 0.2 || start * scale > GUARD_FLOOR_WEIGHT * (1.0 + 1e-9);
-    while o.ensure_target_reads && has_decoys && !summary.target_reads && above_floor(scale) {
+    while guarded && !summary.target_reads && above_floor(scale) {
         scale *= 0.5;
         let (from, span) = (at, (0.85 - at) / 2.0);
         at += span;
         let report = |p: Progress| progress(from + span * p.iteration as f64 / o.max_iterations as f64);
-        // From the heavier solve's end: the same problem with lighter decoys, whose solution is near.
-        let result = solve_round(spec, &cast, x.clone(), tied, scale, 0, Some(&clearly), report, cancel)?;
+        // From the heavier solve's end: the same problem with lighter decoys, whose solution is near. Another
+        // halving follows a misread end while the decoys weigh more than the floor.
+        let judge = &judges[usize::from(above_floor(scale))];
+        judge.reset();
+        let stop = |k: u32, l: &[f32]| judge.stop(k, l);
+        let result = solve_round(spec, &cast, x.clone(), tied, scale, 0, Some(&stop), report, cancel)?;
         absorb(&mut summary, &result, scale);
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
         summary.decoy_weight_scale = scale;
-        let reads = reads_end(result.termination, &l);
+        let reads = reads_end(judge, result.termination, &l);
         summary.target_reads = reads;
         judged(&mut summary, reads);
     }
@@ -457,9 +474,13 @@ fn encode_draw(
     if o.ensure_target_reads && summary.target_reads && scale < 1.0 {
         let between = scale * std::f64::consts::SQRT_2;
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
-        let result = solve_round(spec, &cast, x, tied, between, 0, Some(&clearly), report, cancel)?;
+        // A misread end is dropped for the lighter solve's: this one may give up.
+        let judge = &judges[1];
+        judge.reset();
+        let stop = |k: u32, l: &[f32]| judge.stop(k, l);
+        let result = solve_round(spec, &cast, x, tied, between, 0, Some(&stop), report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
-        let reads = reads_end(result.termination, &l_between);
+        let reads = reads_end(judge, result.termination, &l_between);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
         absorb(&mut summary, &result, between);
         judged(&mut summary, reads);
@@ -607,6 +628,74 @@ pub const GUARD_EARLY_EVERY: u32 = 60;
 /// one of the twelve targets kept a view read by a hair (margin +0.000) that the evaluation's draw misread, and
 /// two were kept a rung lower, with more readers (docs/experiments.md §2e).
 pub const GUARD_EARLY_MARGIN: f64 = 0.02;
+/// A guard solve's checkpoints (`GUARD_EARLY_EVERY`): a lighter solve stops where the target reads its iterate
+/// clearly (`GUARD_EARLY_MARGIN`); a solve that another follows when the target misreads its end (the first,
+/// a halving above the floor, the step back up, whose misread end is dropped) gives up where the target's
+/// reading is out of reach ([`out_of_reach`]), judged by the known-font margin and so only where the text is
+/// known.
+struct GuardJudge<'a> {
+    cast: &'a Cast,
+    reference: &'a Reference,
+    /// The margin the target must read with (`target_margin`).
+    needed: f64,
+    /// Stops where the target reads clearly, with this margin (None: never).
+    clearly: Option<f64>,
+    /// Whether it may give up.
+    gives_up: bool,
+    max_iterations: u32,
+    /// The margin at the last checkpoint.
+    last: std::cell::Cell<Option<f64>>,
+    /// Whether it gave up (the solve's `Stopped` is then not a reading).
+    gave_up: std::cell::Cell<bool>,
+}
+
+impl<'a> GuardJudge<'a> {
+    fn new(cast: &'a Cast, reference: &'a Reference, o: &EncodeOptions, clearly: bool, gives_up: bool) -> Self {
+        Self {
+            cast,
+            reference,
+            needed: o.target_margin,
+            clearly: clearly.then(|| o.target_margin.max(GUARD_EARLY_MARGIN)),
+            gives_up: gives_up && cast.attacker.is_some(),
+            max_iterations: o.max_iterations,
+            last: std::cell::Cell::new(None),
+            gave_up: std::cell::Cell::new(false),
+        }
+    }
+
+    /// Ready for another solve.
+    fn reset(&self) {
+        self.last.set(None);
+        self.gave_up.set(false);
+    }
+
+    /// Whether to stop the solve at iteration `k` with light field `l`.
+    fn stop(&self, k: u32, l: &[f32]) -> bool {
+        let (readable, worst) = self.cast.target_reading(self.reference, l);
+        let reads_with = |margin: f64| readable && worst.is_none_or(|w| w >= margin);
+        if self.clearly.is_some_and(reads_with) {
+            return true;
+        }
+        let (Some(now), true) = (worst, self.gives_up) else {
+            return false;
+        };
+        let before = self.last.replace(Some(now));
+        let hopeless = !reads_with(self.needed)
+            && before.is_some_and(|b| out_of_reach(now, now - b, self.max_iterations.saturating_sub(k), self.needed));
+        self.gave_up.set(hopeless);
+        hopeless
+    }
+}
+
+/// Whether a solve's target, misreading at known-font margin `now` after it rose by `rose` over the last
+/// `GUARD_EARLY_EVERY` iterations, cannot reach `needed` in the `left` iterations the solve has left even if it
+/// went on rising at that pace (it slows as the solve converges: over twelve held-out `secure` targets the first
+/// solve's margin rose by 0.003–0.097 from iteration 60 to 120 and by at most 0.009 in any later 60, and no
+/// target's reading changed after iteration 60; docs/experiments.md §2e).
+fn out_of_reach(now: f64, rose: f64, left: u32, needed: f64) -> bool {
+    now + rose.max(0.0) * f64::from(left) / f64::from(GUARD_EARLY_EVERY) < needed
+}
+
 /// The target guard halves the decoys' weights at least three times (to an eighth of where they started), and on
 /// while they weigh more than this: an eighth of the default 0.3, so that from any start the guard reaches the
 /// weights it reaches from 0.3. From 0.5 an eighth was 0.0625, and a `paper` target that reads at 0.053 from 0.3
@@ -643,10 +732,17 @@ impl Cast {
     /// Whether the target reads `l` by `reference`, through its own operator and through the check's, each
     /// with the known-font attacker's margin at least `margin` where the text is known.
     fn target_reads(&self, reference: &Reference, l: &[f32], margin: f64) -> bool {
-        [&self.target, &self.check].iter().all(|o| {
-            let score = reference.score_observer("target", o, l).0;
-            score.readable && score.known_font.is_none_or(|k| k.margin >= margin)
-        })
+        let (readable, worst) = self.target_reading(reference, l);
+        readable && worst.is_none_or(|w| w >= margin)
+    }
+
+    /// How the target reads `l` by `reference` through its own operator and the check's: whether both looks
+    /// read it, and the smaller of their known-font margins (None where the text is not known).
+    fn target_reading(&self, reference: &Reference, l: &[f32]) -> (bool, Option<f64>) {
+        let scores = [&self.target, &self.check].map(|o| reference.score_observer("target", o, l).0);
+        let readable = scores.iter().all(|s| s.readable);
+        let margins: Option<Vec<f64>> = scores.iter().map(|s| s.known_font.as_ref().map(|k| k.margin)).collect();
+        (readable, margins.map(|m| m.into_iter().fold(f64::INFINITY, f64::min)))
     }
 
     fn build(
@@ -1211,8 +1307,9 @@ fn expand_tied(d: &DisplayGeometry, x: &[f32], tied: bool) -> Vec<f32> {
     }
 }
 
-/// Judges a light field: whether the target reads it (clearly enough to stop a solve early).
-type Judge<'a> = &'a dyn Fn(&[f32]) -> bool;
+/// Judges a solve's iterate at a checkpoint (its iteration count, the light field so far): whether to stop it
+/// there (the target reads it clearly, or cannot read the solve's end, [`GuardJudge`]).
+type Judge<'a> = &'a dyn Fn(u32, &[f32]) -> bool;
 
 /// One solve of the encoder's objective (Eq. 14, with Eq. 16's terms for difference maximisation) from `x`,
 /// stopped early at a checkpoint where `stop_when` judges the light field so far (`GUARD_EARLY_EVERY`), and not
@@ -1279,7 +1376,7 @@ fn solve_round(
         ..Default::default()
     };
     let l_max = d.l_max as f32;
-    let mut stop = stop_when.map(|judge| move |_: u32, x: &[f32]| judge(&expand_tied(d, x, tied)));
+    let mut stop = stop_when.map(|judge| move |k: u32, x: &[f32]| judge(k, &expand_tied(d, x, tied)));
     let checkpoint = stop.as_mut().map(|stop| Checkpoint {
         every: GUARD_EARLY_EVERY,
         stop,
@@ -2037,8 +2134,9 @@ mod tests {
     fn a_lighter_solve_stops_where_the_target_reads_it_clearly() {
         // The decoy with the target's own eyes at twice its weight, up to 300 iterations: the first solve hides
         // the PIN from the target, and each of the guard's lighter solves starts from the heavier one's end. (In
-        // this job: 1 and 1/2 run all 300 iterations and do not read; 1/4 and √2/4 stop at the first checkpoint
-        // and read.)
+        // this job: 1 and 1/2 give up at their second checkpoint, 120 iterations, and do not read; 1/4 and √2/4
+        // stop at the first and read. With every misread solve run to its end, 1 and 1/2 ran all 300 iterations,
+        // and the same weight, √2/4, was kept.)
         let cache = TransportCache::default();
         let cancel = AtomicBool::new(false);
         let mut spec = pin_job(pin_hint());
@@ -2055,24 +2153,30 @@ mod tests {
         };
         let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         let steps = &encoded.solver.solves;
+        // The first solve gives up: the target's margin is out of reach of 0 at its pace by the 300th iteration.
         assert_eq!(
-            (steps[0].decoy_weight_scale, steps[0].target_reads),
-            (1.0, Some(false)),
+            (steps[0].decoy_weight_scale, steps[0].target_reads, steps[0].termination),
+            (1.0, Some(false), Termination::Stopped),
             "{steps:?}"
         );
+        assert!(steps[0].iterations < 300, "{steps:?}");
+        // The weight kept is the one kept with every misread solve run to its end.
+        assert_eq!(encoded.solver.decoy_weight_scale, std::f64::consts::SQRT_2 / 4.0, "{steps:?}");
         assert_eq!(
             steps.iter().map(|s| s.iterations).sum::<u32>(),
             encoded.solver.iterations
         );
         let stopped: Vec<&SolveStep> = steps.iter().filter(|s| s.termination == Termination::Stopped).collect();
-        assert!(!stopped.is_empty(), "{steps:?}");
+        assert!(stopped.iter().any(|s| s.target_reads == Some(true)), "{steps:?}");
         for s in stopped {
-            assert!(
-                s.decoy_weight_scale < 1.0,
-                "only the guard's lighter solves stop early: {steps:?}"
-            );
             assert_eq!(s.iterations % GUARD_EARLY_EVERY, 0);
-            assert_eq!(s.target_reads, Some(true));
+            // A solve stops early where the target reads it clearly (a lighter one), or gives up where the
+            // target's reading is out of reach, from its second checkpoint on.
+            if s.target_reads == Some(true) {
+                assert!(s.decoy_weight_scale < 1.0, "{steps:?}");
+            } else {
+                assert!(s.iterations >= 2 * GUARD_EARLY_EVERY, "{steps:?}");
+            }
         }
         // The frames kept: the last solve's if the target read it, else the one before's. Stopped early, they
         // read through both of the guard's looks with the margin asked.
@@ -2088,6 +2192,24 @@ mod tests {
             0.0
         };
         assert!(cast.target_reads(&reference, &encoded.light_field, margin), "{steps:?}");
+    }
+
+    #[test]
+    fn a_solve_gives_up_only_where_its_margin_cannot_reach_the_needed_one_at_its_pace() {
+        // 180 iterations left are 3 checkpoints: −0.235 rising 0.097 a checkpoint could reach +0.056.
+        assert!(!out_of_reach(-0.235, 0.097, 180, 0.0));
+        // −0.231 rising 0.004 reaches −0.219 at most.
+        assert!(out_of_reach(-0.231, 0.004, 120, 0.0));
+        // A margin that fell is extrapolated flat: out of reach below the needed margin, not at it.
+        assert!(out_of_reach(-0.001, -0.02, 240, 0.0));
+        assert!(!out_of_reach(0.0, -0.02, 240, 0.0));
+        // −0.25 rising 0.125 with 120 left reaches exactly 0: within reach; with 60 left, not.
+        assert!(!out_of_reach(-0.25, 0.125, 120, 0.0));
+        assert!(out_of_reach(-0.25, 0.125, 60, 0.0));
+        // The needed margin counts: +0.01 rising 0.002 with 60 left reaches 0.012, short of 0.02.
+        assert!(out_of_reach(0.01, 0.002, 60, 0.02));
+        // No iterations left: only the margin now.
+        assert!(out_of_reach(-0.001, 1.0, 0, 0.0));
     }
 
     /// The cast of the PIN job with `options` applied to its options.
