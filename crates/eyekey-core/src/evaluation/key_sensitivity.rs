@@ -8,7 +8,6 @@ use crate::physics::spectral::{coupling, sample_observer_parameters, ConeFundame
 use crate::physics::transport::{EyePosition, TransportCache, TransportOptions};
 use crate::physics::zernike::ZernikeCoefficients;
 use rand::{Rng, SeedableRng};
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Optical steps along each direction, µm RMS.
@@ -109,18 +108,11 @@ impl KeySensitivityProbe<'_> {
         base_w: &ZernikeCoefficients,
         cones: &ConeFundamentals,
     ) -> Result<(Vec<Vec<f64>>, Vec<f64>), EvaluationError> {
-        // The directions drawn in order, then every (direction, step) eye built and judged at once, two at a time
-        // keeping both cores busy through the serial parts of each build.
-        let dirs: Vec<Vec<f64>> = (0..self.options.key_directions)
-            .map(|_| random_direction(rng, TERMS.count()))
-            .collect();
-        let eyes: Vec<(&Vec<f64>, f64)> = dirs
-            .iter()
-            .flat_map(|dir| OPTICAL_STEPS_UM.iter().map(move |&step| (dir, step)))
-            .collect();
-        let legs = eyes
-            .into_par_iter()
-            .map(|(dir, step)| {
+        let (mut all, mut radii) = (Vec::new(), Vec::new());
+        for _ in 0..self.options.key_directions {
+            let dir = random_direction(rng, TERMS.count());
+            let mut legs = Vec::new();
+            for &step in &OPTICAL_STEPS_UM {
                 if self.cancel.load(Ordering::Relaxed) {
                     return Err(EvaluationError::Cancelled);
                 }
@@ -129,14 +121,11 @@ impl KeySensitivityProbe<'_> {
                     w.coefficients_um[j] += step * dir[k];
                 }
                 let o = self.observer(&w, cones)?;
-                Ok(self.reference.score_observer("", &o, self.l).0.legibility)
-            })
-            .collect::<Result<Vec<f64>, EvaluationError>>()?;
-        let all: Vec<Vec<f64>> = legs.chunks(OPTICAL_STEPS_UM.len()).map(<[f64]>::to_vec).collect();
-        let radii = all
-            .iter()
-            .map(|legs| self.first_below(legs, &OPTICAL_STEPS_UM))
-            .collect();
+                legs.push(self.reference.score_observer("", &o, self.l).0.legibility);
+            }
+            radii.push(self.first_below(&legs, &OPTICAL_STEPS_UM));
+            all.push(legs);
+        }
         Ok((all, radii))
     }
 

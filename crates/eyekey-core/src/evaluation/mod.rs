@@ -329,28 +329,25 @@ impl Evaluator<'_> {
         if options.head_offsets_mm.is_empty() {
             return Ok(None);
         }
-        self.check()?;
-        // Every ring's positions at once: each builds its own kernels, and two at a time keep both cores busy
-        // through the serial parts of each (ring by ring, each ring's last build left a core idle).
-        let eyes: Vec<(usize, EyePosition)> = options
-            .head_offsets_mm
-            .iter()
-            .enumerate()
-            .flat_map(|(k, &r)| head_ring(r).map(|eye| (k, eye)))
-            .collect();
-        let scores = eyes
-            .into_par_iter()
-            .map(|(k, eye)| {
-                self.check()?;
-                let o = self.observer(self.target, eye)?;
-                Ok((k, self.reference.score_observer("target moved", &o, self.l).0))
-            })
-            .collect::<Result<Vec<_>, EvaluationError>>()?;
-        let rings = options.head_offsets_mm.len();
-        let (mut worst, mut all_read) = (vec![f64::INFINITY; rings], vec![true; rings]);
-        for (k, s) in scores {
-            worst[k] = worst[k].min(s.legibility);
-            all_read[k] &= s.readable;
+        let (mut worst, mut all_read) = (Vec::new(), Vec::new());
+        for &r in &options.head_offsets_mm {
+            self.check()?;
+            let (mut w, mut read) = (f64::INFINITY, true);
+            // The ring's positions at once: each builds its own kernels, and two at a time keep both cores busy
+            // through the serial parts of each.
+            let scores = head_ring(r)
+                .into_par_iter()
+                .map(|eye| {
+                    let o = self.observer(self.target, eye)?;
+                    Ok(self.reference.score_observer("target moved", &o, self.l).0)
+                })
+                .collect::<Result<Vec<_>, EvaluationError>>()?;
+            for s in scores {
+                w = w.min(s.legibility);
+                read &= s.readable;
+            }
+            worst.push(w);
+            all_read.push(read);
         }
         let mut radius = 0.0;
         if target_readable {
