@@ -2161,7 +2161,11 @@ mod tests {
         );
         assert!(steps[0].iterations < 300, "{steps:?}");
         // The weight kept is the one kept with every misread solve run to its end.
-        assert_eq!(encoded.solver.decoy_weight_scale, std::f64::consts::SQRT_2 / 4.0, "{steps:?}");
+        assert_eq!(
+            encoded.solver.decoy_weight_scale,
+            std::f64::consts::SQRT_2 / 4.0,
+            "{steps:?}"
+        );
         assert_eq!(
             steps.iter().map(|s| s.iterations).sum::<u32>(),
             encoded.solver.iterations

@@ -187,9 +187,9 @@ impl Evaluator<'_> {
         let people = sample_population(options.population as usize, options.seed, SamplingScope::default());
         let mut scores = Vec::with_capacity(people.len());
         let mut kept: Vec<(usize, RgbImage)> = Vec::new();
-        // A few people at once, each building their own kernels: the serial parts of one person's build (its
-        // pupil table, its spectra's set-up, the judging) leave a core idle that another person's build fills.
-        // Scores and pictures are then taken in the people's order, as one at a time would.
+        // A few people at once, each building their own kernels: one person's build and judging alone does not
+        // keep every core busy (two a core at once took the 1,000-person evaluation to 0.70× its time,
+        // BENCHMARKS.md "Job"). Scores and pictures are then taken in the people's order, as one at a time would.
         let at_once = 2 * rayon::current_num_threads().max(1);
         for (c, chunk) in people.chunks(at_once).enumerate() {
             self.check()?;
@@ -593,7 +593,7 @@ mod tests {
     }
 
     #[test]
-    fn the_population_is_judged_person_by_person_in_its_order_whatever_how_many_are_built_at_once() {
+    fn the_population_is_judged_person_by_person_in_its_order_however_many_are_built_at_once() {
         // The population's people are built a few at a time; each score, the first views kept and the most
         // legible view must be those of judging each person alone, in the people's order. Seven people (not a
         // multiple of the number built at once) look at a plain image, which each reads with their own
