@@ -210,7 +210,9 @@ pub struct EncodeOptions {
     /// decoy's weight and leak weight and solve again from the last solve's end, until the target reads or the
     /// weights are down to an eighth of where they started and to 0.0375 (`GUARD_FLOOR_WEIGHT`) or below; then
     /// try the weight √2 above the one that read and keep it if the target still reads. Each lighter solve stops
-    /// early where the target already reads its view clearly (`GUARD_EARLY_EVERY`). The target's reading comes
+    /// early where the target already reads its view clearly (`GUARD_EARLY_EVERY`), and a solve that another
+    /// follows when the target misreads its end gives up where, with the text known, the target's margin cannot
+    /// reach the one asked by the iteration cap at its pace (docs/design.md §3.1). The target's reading comes
     /// first: a display that cannot hide the document from the decoys then shows it to the target anyway, and
     /// the evaluation says who else reads.
     pub ensure_target_reads: bool,

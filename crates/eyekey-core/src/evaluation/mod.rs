@@ -508,20 +508,30 @@ fn mean(v: &[f32]) -> f64 {
 mod tests {
     use super::*;
 
+    /// The PIN slip's lines.
+    const PIN_LINES: [&str; 2] = ["PIN", "4821"];
+
+    /// A 32×32 lenslet display showing a PIN slip plainly (every view the same image): the display, the slip,
+    /// the light field.
+    fn plain_pin() -> (DisplayGeometry, RgbImage, Vec<f32>) {
+        let display = DisplayGeometry {
+            holes_x: 32,
+            holes_y: 32,
+            ..DisplayGeometry::lenslet()
+        };
+        let document = crate::imaging::glyphs::render_text(&PIN_LINES, 128, 128, 4);
+        let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        (display, document, l)
+    }
+
     #[test]
     fn a_plain_image_is_read_by_a_bystander_beside_the_target_and_not_from_far_outside_the_display() {
         // A plain 2D image (every view of a lenslet equal) is the opposite of secret: two block periods aside
         // (12.8 mm) an eye sees it through the blocks two over, shifted by two lenslets, and reads it once the
         // shift is undone. (Between repeats the pupil straddles two blocks and sees a double image one lenslet
         // apart.) 500 mm aside the screen lies outside every lenslet's line of sight: the view is dark and unread.
-        let display = DisplayGeometry {
-            holes_x: 32,
-            holes_y: 32,
-            ..DisplayGeometry::lenslet()
-        };
-        let lines = ["PIN", "4821"];
-        let document = crate::imaging::glyphs::render_text(&lines, 128, 128, 4);
-        let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        let (display, document, l) = plain_pin();
+        let lines = PIN_LINES;
         let repeat = 2.0 * display.block_shift_at_pupil_mm(display.viewing_distance_mm);
         let options = EvaluationOptions {
             population: 0,
@@ -598,13 +608,7 @@ mod tests {
         // legible view must be those of judging each person alone, in the people's order. Seven people (not a
         // multiple of the number built at once) look at a plain image, which each reads with their own
         // legibility.
-        let display = DisplayGeometry {
-            holes_x: 32,
-            holes_y: 32,
-            ..DisplayGeometry::lenslet()
-        };
-        let document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
-        let l = crate::physics::observer::plain_light_field_for_image(&display, &document);
+        let (display, document, l) = plain_pin();
         let options = EvaluationOptions {
             population: 7,
             saved_population_views: 2,
