@@ -432,7 +432,6 @@ fn encode_draw(
     // A lighter solve starts from the heavier one's end; where the target already reads it clearly at a
     // checkpoint, it stops there (`GUARD_EARLY_EVERY`, `GUARD_EARLY_MARGIN`); where a solve after it would follow
     // a misread end, it gives up where the target's reading is out of reach (`GuardJudge`).
-    let judges = [false, true].map(|gives_up| GuardJudge::new(&cast, &reference, o, true, gives_up));
     // Whether the target reads a lighter solve's end: stopped, it read clearly at the checkpoint, unless it gave
     // up.
     let reads_end = |judge: &GuardJudge, how: Termination, l: &[f32]| {
@@ -457,15 +456,14 @@ fn encode_draw(
         let report = |p: Progress| progress(from + span * p.iteration as f64 / o.max_iterations as f64);
         // From the heavier solve's end: the same problem with lighter decoys, whose solution is near. Another
         // halving follows a misread end while the decoys weigh more than the floor.
-        let judge = &judges[usize::from(above_floor(scale))];
-        judge.reset();
+        let judge = GuardJudge::new(&cast, &reference, o, true, above_floor(scale));
         let stop = |k: u32, l: &[f32]| judge.stop(k, l);
         let result = solve_round(spec, &cast, x.clone(), tied, scale, 0, Some(&stop), report, cancel)?;
         absorb(&mut summary, &result, scale);
         l = expand_tied(&spec.display, &result.x, tied);
         x = result.x;
         summary.decoy_weight_scale = scale;
-        let reads = reads_end(judge, result.termination, &l);
+        let reads = reads_end(&judge, result.termination, &l);
         summary.target_reads = reads;
         judged(&mut summary, reads);
     }
@@ -475,12 +473,11 @@ fn encode_draw(
         let between = scale * std::f64::consts::SQRT_2;
         let report = |p: Progress| progress(at + (0.85 - at) * p.iteration as f64 / o.max_iterations as f64);
         // A misread end is dropped for the lighter solve's: this one may give up.
-        let judge = &judges[1];
-        judge.reset();
+        let judge = GuardJudge::new(&cast, &reference, o, true, true);
         let stop = |k: u32, l: &[f32]| judge.stop(k, l);
         let result = solve_round(spec, &cast, x, tied, between, 0, Some(&stop), report, cancel)?;
         let l_between = expand_tied(&spec.display, &result.x, tied);
-        let reads = reads_end(judge, result.termination, &l_between);
+        let reads = reads_end(&judge, result.termination, &l_between);
         let lighter = (summary.termination, summary.objective, summary.lipschitz);
         absorb(&mut summary, &result, between);
         judged(&mut summary, reads);
@@ -628,7 +625,7 @@ pub const GUARD_EARLY_EVERY: u32 = 60;
 /// one of the twelve targets kept a view read by a hair (margin +0.000) that the evaluation's draw misread, and
 /// two were kept a rung lower, with more readers (docs/experiments.md §2e).
 pub const GUARD_EARLY_MARGIN: f64 = 0.02;
-/// A guard solve's checkpoints (`GUARD_EARLY_EVERY`): a lighter solve stops where the target reads its iterate
+/// One guard solve's checkpoints (`GUARD_EARLY_EVERY`): a lighter solve stops where the target reads its iterate
 /// clearly (`GUARD_EARLY_MARGIN`); a solve that another follows when the target misreads its end (the first,
 /// a halving above the floor, the step back up, whose misread end is dropped) gives up where the target's
 /// reading is out of reach ([`out_of_reach`]), judged by the known-font margin and so only where the text is
@@ -661,12 +658,6 @@ impl<'a> GuardJudge<'a> {
             last: std::cell::Cell::new(None),
             gave_up: std::cell::Cell::new(false),
         }
-    }
-
-    /// Ready for another solve.
-    fn reset(&self) {
-        self.last.set(None);
-        self.gave_up.set(false);
     }
 
     /// Whether to stop the solve at iteration `k` with light field `l`.

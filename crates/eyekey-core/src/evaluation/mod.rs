@@ -524,6 +524,31 @@ mod tests {
         (display, document, l)
     }
 
+    /// [`evaluate`] of `l` showing `document` on `display`, for a target with perfect eyes and no further
+    /// observers.
+    fn evaluate_for_perfect_eyes(
+        display: &DisplayGeometry,
+        l: &[f32],
+        document: &RgbImage,
+        options: &EvaluationOptions,
+        cache: &TransportCache,
+    ) -> Evaluation {
+        let perfect = VisionProfile::perfect();
+        evaluate(
+            display,
+            l,
+            document,
+            0.8,
+            &perfect,
+            &[],
+            options,
+            cache,
+            &|_| {},
+            &AtomicBool::new(false),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn a_plain_image_is_read_by_a_bystander_beside_the_target_and_not_from_far_outside_the_display() {
         // A plain 2D image (every view of a lenslet equal) is the opposite of secret: two block periods aside
@@ -531,7 +556,6 @@ mod tests {
         // shift is undone. (Between repeats the pupil straddles two blocks and sees a double image one lenslet
         // apart.) 500 mm aside the screen lies outside every lenslet's line of sight: the view is dark and unread.
         let (display, document, l) = plain_pin();
-        let lines = PIN_LINES;
         let repeat = 2.0 * display.block_shift_at_pupil_mm(display.viewing_distance_mm);
         let options = EvaluationOptions {
             population: 0,
@@ -540,7 +564,7 @@ mod tests {
             head_offsets_mm: vec![],
             camera_focus_d: vec![],
             document_text: Some(DocumentText {
-                lines: lines.iter().map(|s| s.to_string()).collect(),
+                lines: PIN_LINES.iter().map(|s| s.to_string()).collect(),
                 scale: 4,
                 alphabet: "0123456789".into(),
             }),
@@ -554,19 +578,7 @@ mod tests {
             }),
             ..Default::default()
         };
-        let ev = evaluate(
-            &display,
-            &l,
-            &document,
-            0.8,
-            &VisionProfile::perfect(),
-            &[],
-            &options,
-            &TransportCache::default(),
-            &|_| {},
-            &AtomicBool::new(false),
-        )
-        .unwrap();
+        let ev = evaluate_for_perfect_eyes(&display, &l, &document, &options, &TransportCache::default());
         let b = ev.report.bystanders.unwrap();
         assert_eq!(b.positions.len(), 8);
         assert_eq!(b.nearest_reader_mm, Some(repeat), "{:#?}", b.positions);
@@ -619,19 +631,7 @@ mod tests {
             ..Default::default()
         };
         let cache = TransportCache::default();
-        let ev = evaluate(
-            &display,
-            &l,
-            &document,
-            0.8,
-            &VisionProfile::perfect(),
-            &[],
-            &options,
-            &cache,
-            &|_| {},
-            &AtomicBool::new(false),
-        )
-        .unwrap();
+        let ev = evaluate_for_perfect_eyes(&display, &l, &document, &options, &cache);
         let people = sample_population(7, options.seed, SamplingScope::default());
         let topts = TransportOptions {
             sub_rays: options.sub_rays,
