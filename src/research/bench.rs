@@ -9,6 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 use super::table_header;
@@ -34,6 +35,77 @@ pub fn peak_memory_bytes() -> u64 {
             })
         })
         .unwrap_or(0)
+}
+
+/// CPU time this process has used, every thread's, user and system (getrusage), in seconds.
+pub fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage writes the struct it is given and nothing else.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } != 0 {
+        return f64::NAN;
+    }
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    secs(usage.ru_utime) + secs(usage.ru_stime)
+}
+
+/// The process's CPU time sampled every 10 ms from a thread of its own while some work runs, to tell how many
+/// cores a phase of that work kept busy ([`Self::busy`]).
+struct CpuTrace {
+    start: Instant,
+    samples: std::sync::Arc<std::sync::Mutex<Vec<(f64, f64)>>>,
+    stop: std::sync::Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl CpuTrace {
+    fn start() -> Self {
+        let start = Instant::now();
+        let samples = std::sync::Arc::new(std::sync::Mutex::new(vec![(0.0, cpu_seconds())]));
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (samples, stop) = (samples.clone(), stop.clone());
+            std::thread::spawn(move || {
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                    let at = start.elapsed().as_secs_f64();
+                    samples
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push((at, cpu_seconds()));
+                }
+            })
+        };
+        Self {
+            start,
+            samples,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// Stops sampling (one last sample now).
+    fn finish(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        let at = self.start.elapsed().as_secs_f64();
+        self.samples
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((at, cpu_seconds()));
+    }
+
+    /// The cores kept busy on average between `from` and `to` seconds after the start: CPU time over wall time,
+    /// from the samples nearest inside the window.
+    fn busy(&self, from: f64, to: f64) -> f64 {
+        let samples = self.samples.lock().unwrap_or_else(|e| e.into_inner());
+        let inside: Vec<&(f64, f64)> = samples.iter().filter(|(t, _)| *t >= from && *t <= to).collect();
+        match (inside.first(), inside.last()) {
+            (Some(a), Some(b)) if b.0 > a.0 => (b.1 - a.1) / (b.0 - a.0),
+            _ => f64::NAN,
+        }
+    }
 }
 
 /// Streaming read bandwidth of this machine: a parallel sum over a 512 MiB f32 array, best of 5, GB/s.
@@ -986,6 +1058,7 @@ impl BenchRun<'_> {
             &[2, 8, 13],
             &format!("{} wave", self.args.preset),
         )?);
+        body.push_str(&fista_pass_rows(1_000_000));
         Ok(body)
     }
 
@@ -1163,9 +1236,13 @@ impl BenchRun<'_> {
         let spec = self.encode_spec();
         let dir = tempfile::tempdir()?;
         let cancel = AtomicBool::new(false);
-        let t = Instant::now();
+        let mut trace = CpuTrace::start();
+        let t = trace.start;
         let encoded = pipeline::encode(&spec, &cache, &|_| {}, &cancel)?;
         let t_solve = t.elapsed().as_secs_f64();
+        trace.finish();
+        let solve_began = t_solve - encoded.solver.seconds;
+        let (busy_before, busy_solving) = (trace.busy(0.0, solve_began), trace.busy(solve_began, t_solve));
         pipeline::write_outputs(
             &spec,
             &encoded,
@@ -1191,9 +1268,9 @@ impl BenchRun<'_> {
         Ok(format!(
             "Measured {} by `{}` ({}, transport cache disabled: a cold start).\n\n{}\
              | whole 2-observer encode (transport, solve, bundle) | {total:.2} s |\n\
-             | of which operators (2 observers × 4 bands; the target guard's second look, one person at {}× the sub-rays) and set-up | {:.2} s |\n\
+             | of which operators (2 observers × 4 bands; the target guard's second look, one person at {}× the sub-rays) and set-up | {:.2} s ({busy_before:.2} cores busy of {}) |\n\
              | of which the guard's second look (built again apart) | {t_check:.2} s |\n\
-             | of which solve | {:.2} s ({} iterations, {}) |\n\
+             | of which solve | {:.2} s ({} iterations, {}; {busy_solving:.2} cores busy) |\n\
              | bundle write | {:.2} s |\n| peak resident memory | {:.0} MB |\n",
             self.stamp,
             self.cmd,
@@ -1201,6 +1278,7 @@ impl BenchRun<'_> {
             table_header(&["quantity", "value"]),
             pipeline::GUARD_SUB_RAYS,
             t_solve - encoded.solver.seconds,
+            rayon::current_num_threads(),
             encoded.solver.seconds,
             encoded.solver.iterations,
             encoded.solver.termination,
@@ -1208,6 +1286,56 @@ impl BenchRun<'_> {
             peak_memory_bytes() as f64 / 1e6
         ))
     }
+}
+
+/// FISTA's vector work per iteration at `n` unknowns: the projected step, the restart test's inner product and the
+/// extrapolation as three rayon passes (the solver's loop before `solver::fista_pass`, here as the baseline)
+/// against `fista_pass`'s one pass, alternately, three rounds of 30 iterations each; the median of each.
+fn fista_pass_rows(n: usize) -> String {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let fill = |rng: &mut rand_chacha::ChaCha8Rng| (0..n).map(|_| rng.gen::<f32>()).collect::<Vec<f32>>();
+    let (mut y, g, x) = (fill(&mut rng), fill(&mut rng), fill(&mut rng));
+    let mut x_new = vec![0f32; n];
+    let (step, beta) = (0.1f32, 0.5f32);
+    let project = |v: f32| v.clamp(0.0, 1.0);
+    let (mut three, mut one) = (Vec::new(), Vec::new());
+    for _ in 0..3 {
+        for _ in 0..30 {
+            let t = Instant::now();
+            x_new
+                .par_iter_mut()
+                .zip(y.par_iter().zip(g.par_iter()))
+                .for_each(|(xn, (yi, gi))| *xn = project(yi - step * gi));
+            let uphill: f64 = g
+                .par_iter()
+                .zip(x_new.par_iter().zip(x.par_iter()))
+                .map(|(g, (a, b))| *g as f64 * (*a as f64 - *b as f64))
+                .sum();
+            y.par_iter_mut()
+                .zip(x_new.par_iter().zip(x.par_iter()))
+                .for_each(|(yi, (a, b))| *yi = project(a + beta * (a - b)));
+            std::hint::black_box(uphill);
+            three.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        for _ in 0..30 {
+            let t = Instant::now();
+            let uphill =
+                eyekey_core::encoding::solver::fista_pass(&mut y, &g, &x, &mut x_new, step, None, beta, (0.0, 1.0));
+            std::hint::black_box(uphill);
+            one.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (three, one) = (median(&mut three), median(&mut one));
+    format!(
+        "\nThe solver's vector work per iteration at {n} unknowns (x⁺ = Π(y − ∇f/L), the restart test ⟨∇f, x⁺ − x⟩, \
+         y = Π(x⁺ + β(x⁺ − x))), alternately in this run, three rounds of 30, medians: as three passes (36 MB moved) \
+         {three:.2} ms, as `fista_pass`'s one (20 MB) {one:.2} ms: **{:.2}×**.\n",
+        one / three
+    )
 }
 
 /// An encode's solves in words: "1.000 × 261 converged, not read; 0.500 × 60 stopped, read; …" (the decoys'

@@ -356,7 +356,7 @@ pub fn minimise_judged(
         (l, None)
     };
     let step = (1.0 / lipschitz) as f32;
-    let project = |v: f32| v.clamp(lower, upper);
+    let project = box_projection(lower, upper);
     let mut x: Vec<f32> = x0.into_par_iter().map(project).collect();
     let mut y = x.clone();
     let mut x_new = vec![0f32; n];
@@ -375,34 +375,36 @@ pub fn minimise_judged(
             termination = Termination::NumericalFailure;
             break;
         }
-        // Projected gradient step from the extrapolated point y.
-        match &steps {
-            Some(steps) => x_new
-                .par_iter_mut()
-                .zip(y.par_iter().zip(grad.par_iter().zip(steps.par_iter())))
-                .for_each(|(xn, (yi, (gi, step)))| *xn = project(yi - step * gi)),
-            None => x_new
-                .par_iter_mut()
-                .zip(y.par_iter().zip(grad.par_iter()))
-                .for_each(|(xn, (yi, gi))| *xn = project(yi - step * gi)),
-        }
-        // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded.
-        let uphill = directional(&grad, &x_new, &x);
-        let monotone_break = f_y > f_x * (1.0 + 1e-12) && t > 1.0;
-        if uphill > 0.0 || monotone_break {
+        // Monotone: a step from y whose objective rose above f(x) is undone and the momentum dropped (a plain
+        // projected-gradient step from x next).
+        if f_y > f_x * (1.0 + 1e-12) && t > 1.0 {
             restarts += 1;
             t = 1.0;
-            if monotone_break {
-                // Undo the extrapolation: restart from x itself (a plain projected-gradient step next).
-                y.copy_from_slice(&x);
-                continue;
-            }
+            y.copy_from_slice(&x);
+            continue;
         }
+        // The projected gradient step from y, the restart test and the next extrapolated point, in one pass.
         let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
         let beta = ((t - 1.0) / t_next) as f32;
-        y.par_iter_mut()
-            .zip(x_new.par_iter().zip(x.par_iter()))
-            .for_each(|(yi, (a, b))| *yi = project(a + beta * (a - b)));
+        let uphill = fista_pass(
+            &mut y,
+            &grad,
+            &x,
+            &mut x_new,
+            step,
+            steps.as_deref(),
+            beta,
+            (lower, upper),
+        );
+        if uphill > 0.0 {
+            // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded: at t = 1, β = 0.
+            restarts += 1;
+            t = 1.0;
+            y.par_iter_mut()
+                .zip(x_new.par_iter().zip(x.par_iter()))
+                .for_each(|(yi, (a, b))| *yi = project(a + 0.0 * (a - b)));
+        }
+        let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
         std::mem::swap(&mut x, &mut x_new);
         t = t_next;
         iterations = k + 1;
@@ -442,12 +444,104 @@ pub fn minimise_judged(
     }
 }
 
-/// ⟨g, a − b⟩ in f64.
-fn directional(g: &[f32], a: &[f32], b: &[f32]) -> f64 {
-    g.par_iter()
-        .zip(a.par_iter().zip(b.par_iter()))
-        .map(|(g, (a, b))| *g as f64 * (*a as f64 - *b as f64))
-        .sum()
+/// The unknowns per chunk of [`fista_pass`]: its partial sums are taken per chunk and added in the chunks' order,
+/// so the restart test does not depend on how the work was split between threads.
+const PASS_CHUNK: usize = 1 << 14;
+
+/// [`fista_pass`]'s element-wise work on one chunk: x⁺ = Π(y − s·g), y ← Π(x⁺ + β(x⁺ − x)), s the unknown's step
+/// in `steps` or `step` for all.
+#[allow(clippy::too_many_arguments)]
+fn step_chunk(
+    y: &mut [f32],
+    x_new: &mut [f32],
+    g: &[f32],
+    x: &[f32],
+    step: f32,
+    steps: Option<&[f32]>,
+    beta: f32,
+    project: &impl Fn(f32) -> f32,
+) {
+    let n = y.len();
+    let (x_new, g, x) = (&mut x_new[..n], &g[..n], &x[..n]);
+    match steps {
+        Some(steps) => {
+            let steps = &steps[..n];
+            for k in 0..n {
+                let v = project(y[k] - steps[k] * g[k]);
+                y[k] = project(v + beta * (v - x[k]));
+                x_new[k] = v;
+            }
+        }
+        None => {
+            for k in 0..n {
+                let v = project(y[k] - step * g[k]);
+                y[k] = project(v + beta * (v - x[k]));
+                x_new[k] = v;
+            }
+        }
+    }
+}
+
+/// ⟨g, a − b⟩ in f64, in eight running sums (added in order at the end), so that the additions overlap.
+fn inner_difference(g: &[f32], a: &[f32], b: &[f32]) -> f64 {
+    let mut lanes = [0f64; 8];
+    let (gc, ac, bc) = (g.chunks_exact(8), a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = (gc.remainder().iter().zip(ac.remainder()).zip(bc.remainder()))
+        .map(|((g, a), b)| *g as f64 * (*a as f64 - *b as f64))
+        .sum();
+    for ((g, a), b) in gc.zip(ac).zip(bc) {
+        for l in 0..8 {
+            lanes[l] += g[l] as f64 * (a[l] as f64 - b[l] as f64);
+        }
+    }
+    lanes.iter().sum::<f64>() + tail
+}
+
+/// Π onto [lower, upper]: `f32::clamp`'s arithmetic with its bounds checked once here, not per unknown (the
+/// check kept the per-unknown passes from being vectorised).
+fn box_projection(lower: f32, upper: f32) -> impl Fn(f32) -> f32 + Copy + Sync {
+    assert!(lower <= upper, "the box's bounds, {lower} ≤ {upper}");
+    move |v: f32| {
+        let v = if v < lower { lower } else { v };
+        if v > upper {
+            upper
+        } else {
+            v
+        }
+    }
+}
+
+/// One FISTA iteration's vector work in one pass over the unknowns: x⁺ = Π(y − s∘∇f(y)) (s = `step` for every
+/// unknown, or `steps`) into `x_new`; the restart test's ⟨∇f(y), x⁺ − x⟩ (returned, in f64); and the next
+/// extrapolated point Π(x⁺ + β(x⁺ − x)) written over y, for the momentum kept (the caller recomputes y where the
+/// test restarts). Three passes' arithmetic, element by element, with y, ∇f and x read once.
+#[allow(clippy::too_many_arguments)]
+pub fn fista_pass(
+    y: &mut [f32],
+    grad: &[f32],
+    x: &[f32],
+    x_new: &mut [f32],
+    step: f32,
+    steps: Option<&[f32]>,
+    beta: f32,
+    (lower, upper): (f32, f32),
+) -> f64 {
+    let project = box_projection(lower, upper);
+    let chunk = |(i, (y, x_new)): (usize, (&mut [f32], &mut [f32]))| {
+        let at = i * PASS_CHUNK;
+        let (g, x) = (&grad[at..at + y.len()], &x[at..at + y.len()]);
+        let steps = steps.map(|s| &s[at..at + y.len()]);
+        step_chunk(y, x_new, g, x, step, steps, beta, &project);
+        // The chunk is in cache now.
+        inner_difference(g, x_new, x)
+    };
+    let partial: Vec<f64> = y
+        .par_chunks_mut(PASS_CHUNK)
+        .zip(x_new.par_chunks_mut(PASS_CHUNK))
+        .enumerate()
+        .map(chunk)
+        .collect();
+    partial.iter().sum()
 }
 
 /// Largest violation of the box-constrained first-order (KKT) conditions at x, relative to ‖∇f‖∞:
@@ -878,5 +972,124 @@ mod tests {
         }
         let est = estimate_lipschitz(&p, 50, 1);
         assert!(est >= lam * 0.999 && est <= lam * 1.2, "{est} vs {lam}");
+    }
+
+    /// f(x) = Σ (a_i x_i − b_i)² + c Σ (x_i − x_(i+1))²: a chain long enough for several of the one-pass step's
+    /// chunks, with targets outside the box so that bounds bind, and coupling enough for momentum to overshoot.
+    struct Chain {
+        a: Vec<f32>,
+        b: Vec<f32>,
+        c: f32,
+    }
+
+    impl Objective for Chain {
+        fn dim(&self) -> usize {
+            self.a.len()
+        }
+        fn value_and_gradient(&self, x: &[f32], g: &mut [f32]) -> f64 {
+            let n = x.len();
+            let mut f = 0f64;
+            for i in 0..n {
+                let r = self.a[i] * x[i] - self.b[i];
+                f += (r as f64).powi(2);
+                g[i] = 2.0 * self.a[i] * r;
+            }
+            for i in 0..n - 1 {
+                let d = x[i] - x[i + 1];
+                f += (self.c * d * d) as f64;
+                g[i] += 2.0 * self.c * d;
+                g[i + 1] -= 2.0 * self.c * d;
+            }
+            f
+        }
+    }
+
+    /// The FISTA loop as three passes over the unknowns (the projected step, the restart test's inner product, the
+    /// extrapolation), sequential: what [`fista_pass`] fuses, to compare its iterates with.
+    fn three_pass_fista(
+        obj: &dyn Objective,
+        mut x: Vec<f32>,
+        step: f32,
+        steps: Option<&[f32]>,
+        iterations: u32,
+    ) -> (Vec<f32>, u32) {
+        let project = |v: f32| v.clamp(0.0, 1.0);
+        let n = x.len();
+        let (mut y, mut x_new, mut grad) = (x.clone(), vec![0f32; n], vec![0f32; n]);
+        let (mut t, mut f_x, mut restarts) = (1.0f64, f64::INFINITY, 0);
+        for _ in 0..iterations {
+            let f_y = obj.value_and_gradient(&y, &mut grad);
+            for i in 0..n {
+                x_new[i] = project(y[i] - steps.map_or(step, |s| s[i]) * grad[i]);
+            }
+            let uphill: f64 = (0..n).map(|i| grad[i] as f64 * (x_new[i] as f64 - x[i] as f64)).sum();
+            let monotone_break = f_y > f_x * (1.0 + 1e-12) && t > 1.0;
+            if uphill > 0.0 || monotone_break {
+                restarts += 1;
+                t = 1.0;
+                if monotone_break {
+                    y.copy_from_slice(&x);
+                    continue;
+                }
+            }
+            let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
+            let beta = ((t - 1.0) / t_next) as f32;
+            for i in 0..n {
+                y[i] = project(x_new[i] + beta * (x_new[i] - x[i]));
+            }
+            std::mem::swap(&mut x, &mut x_new);
+            t = t_next;
+            f_x = f_y;
+        }
+        (x, restarts)
+    }
+
+    #[test]
+    fn the_one_pass_step_takes_the_three_pass_steps_bit_for_bit() {
+        let n = 3 * PASS_CHUNK + 1234;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let chain = Chain {
+            a: (0..n).map(|_| rng.gen_range(0.2f32..2.0)).collect(),
+            b: (0..n).map(|_| rng.gen_range(-0.5f32..1.8)).collect(),
+            c: 3.0,
+        };
+        let l = estimate_lipschitz(&chain, 30, 3);
+        let scales = jacobi_scales(&chain);
+        let x0: Vec<f32> = (0..n).map(|_| rng.gen::<f32>()).collect();
+        for preconditioned in [false, true] {
+            let l = if preconditioned {
+                let half = scales.iter().map(|s| s.sqrt()).collect();
+                estimate_lipschitz(&Scaled { inner: &chain, half }, 30, 3)
+            } else {
+                l
+            };
+            let opts = SolverOptions {
+                max_iterations: 150,
+                tolerance: 0.0,
+                lipschitz: Some(l),
+                preconditioned,
+                ..Default::default()
+            };
+            let r = minimise(
+                &chain,
+                x0.clone(),
+                0.0,
+                1.0,
+                &opts,
+                &mut |_| {},
+                &AtomicBool::new(false),
+            );
+            let step = (1.0 / l) as f32;
+            let steps: Vec<f32> = scales.iter().map(|s| s * step).collect();
+            let (x, restarts) = three_pass_fista(&chain, x0.clone(), step, preconditioned.then_some(&steps[..]), 150);
+            assert!(
+                r.restarts > 0,
+                "the momentum restarts somewhere, so that both branches are compared"
+            );
+            assert_eq!(r.restarts, restarts, "preconditioned {preconditioned}");
+            let differ = r.x.iter().zip(&x).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+            assert_eq!(differ, 0, "preconditioned {preconditioned}: {differ} unknowns differ");
+            assert!(r.x.contains(&0.0) && r.x.contains(&1.0), "bounds bind");
+        }
     }
 }
