@@ -22,6 +22,7 @@ use super::trace::{bilinear, floor, sin_cos_turns, Tracer};
 use crate::physics::diffraction::{airy_intensity, sinc2, AiryTable};
 use crate::physics::display::{Aperture, DisplayGeometry};
 use crate::physics::transport::{EyePosition, TransportMatrix, TransportStats};
+use crate::physics::zernike::GRADIENT_BATCH;
 
 /// One tap of a view's kernel: the offset (retinal pixels) from the sample's block origin, its weight and
 /// its ∂/∂W_j per derivative term.
@@ -625,6 +626,32 @@ impl Tracer<'_> {
             let v = view as usize;
             traced = bundle.traced[v];
             let r2 = self.r_p * self.r_p;
+            // The rays that enter, a batch at a time, their wavefront gradients evaluated side by side
+            // (`ZernikePolynomial::gradients`), then splatted one by one in the bundle's order.
+            let (mut xs, mut ys) = ([0.0; GRADIENT_BATCH], [0.0; GRADIENT_BATCH]);
+            let mut batch: [Option<&AimedRay>; GRADIENT_BATCH] = [None; GRADIENT_BATCH];
+            let mut grads = [[0.0; 2]; GRADIENT_BATCH];
+            let mut filled = 0;
+            let mut flush = |filled: usize,
+                             xs: &[f64; GRADIENT_BATCH],
+                             ys: &[f64; GRADIENT_BATCH],
+                             batch: &[Option<&AimedRay>; GRADIENT_BATCH],
+                             kernel: &mut KernelBox| {
+                self.poly.gradients(xs, ys, &mut grads);
+                for b in 0..filled {
+                    let ray = batch[b].expect("a filled slot");
+                    for (df, tp) in dfs.iter_mut().zip(&self.term_polys) {
+                        let g = tp.gradient(xs[b], ys[b]);
+                        *df = [self.shift_per_grad * g[0], self.shift_per_grad * g[1]];
+                    }
+                    let g = grads[b];
+                    let f = [
+                        ray.f0[0] as f64 + self.shift_per_grad * g[0],
+                        ray.f0[1] as f64 + self.shift_per_grad * g[1],
+                    ];
+                    kernel.splat(f, ray.w as f64, &dfs);
+                }
+            };
             for ray in &bundle.views[v] {
                 let (px, py) = (ray.p[0] as f64, ray.p[1] as f64);
                 if px * px + py * py > r2 {
@@ -635,17 +662,15 @@ impl Tracer<'_> {
                 if power_only {
                     continue;
                 }
-                let (rx, ry) = (px / self.r_p, py / self.r_p);
-                for (df, tp) in dfs.iter_mut().zip(&self.term_polys) {
-                    let g = tp.gradient(rx, ry);
-                    *df = [self.shift_per_grad * g[0], self.shift_per_grad * g[1]];
+                (xs[filled], ys[filled], batch[filled]) = (px / self.r_p, py / self.r_p, Some(ray));
+                filled += 1;
+                if filled == GRADIENT_BATCH {
+                    flush(filled, &xs, &ys, &batch, &mut kernel);
+                    filled = 0;
                 }
-                let g = self.poly.gradient(rx, ry);
-                let f = [
-                    ray.f0[0] as f64 + self.shift_per_grad * g[0],
-                    ray.f0[1] as f64 + self.shift_per_grad * g[1],
-                ];
-                kernel.splat(f, ray.w as f64, &dfs);
+            }
+            if filled > 0 {
+                flush(filled, &xs, &ys, &batch, &mut kernel);
             }
             return ViewKernel {
                 taps: kernel.taps(),
