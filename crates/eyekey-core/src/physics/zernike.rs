@@ -325,9 +325,9 @@ impl ZernikePolynomial {
         [gx, gy]
     }
 
-    /// [`Self::gradient`] at `GRADIENT_BATCH` points at once (`x[b]`, `y[b]`; `len` of them used), into `out`:
-    /// the same products and sums in the same order for each point, bit for bit, laid out so that the
-    /// compiler runs the points side by side in vector registers.
+    /// [`Self::gradient`] at `GRADIENT_BATCH` points at once (`x[b]`, `y[b]`) into `out[b]`: the same products
+    /// and sums in the same order for each point, bit for bit, laid out so that the compiler runs the points side
+    /// by side in vector registers. A caller with fewer points fills the rest with any value and ignores theirs.
     #[inline]
     pub fn gradients(
         &self,
