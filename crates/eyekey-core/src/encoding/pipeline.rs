@@ -359,8 +359,7 @@ fn encode_draw(
     };
     let total_iterations = o.max_iterations as f64 * (rounds + 1) as f64;
     // Whether the target guard may follow the first solve with lighter ones (`ensure_target_reads`).
-    let has_decoys = !cast.others.is_empty();
-    let guarded = o.ensure_target_reads && has_decoys;
+    let guarded = o.ensure_target_reads && !cast.others.is_empty();
     let g = cast.target.grid();
     // The evaluation's judge: the known-font attacker where the text is known (adaptive rounds rank candidates
     // by legibility alone).

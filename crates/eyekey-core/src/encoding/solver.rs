@@ -384,7 +384,7 @@ pub fn minimise_judged(
             continue;
         }
         // The projected gradient step from y, the restart test and the next extrapolated point, in one pass.
-        let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
+        let mut t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
         let beta = ((t - 1.0) / t_next) as f32;
         let uphill = fista_pass(
             &mut y,
@@ -397,14 +397,12 @@ pub fn minimise_judged(
             (lower, upper),
         );
         if uphill > 0.0 {
-            // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded: at t = 1, β = 0.
+            // Gradient restart: momentum pointing uphill (⟨∇f(y), x⁺ − x⟩ > 0) is discarded: from t = 1, β = 0
+            // and y is x⁺ itself.
             restarts += 1;
-            t = 1.0;
-            y.par_iter_mut()
-                .zip(x_new.par_iter().zip(x.par_iter()))
-                .for_each(|(yi, (a, b))| *yi = project(a + 0.0 * (a - b)));
+            t_next = (1.0 + 5f64.sqrt()) / 2.0;
+            y.copy_from_slice(&x_new);
         }
-        let t_next = (1.0 + (1.0 + 4.0 * t * t).sqrt()) / 2.0;
         std::mem::swap(&mut x, &mut x_new);
         t = t_next;
         iterations = k + 1;
