@@ -416,6 +416,7 @@ const PRODUCT_COLUMNS: usize = 8;
 
 /// acc[i] += column[i mod Q'] · k_column[i]: a column of the spectrum product (a view's spectrum repeated k
 /// times along y).
+///
 /// The same arithmetic compiled for avx2 where the CPU has it (no fused multiply-adds: Rust does not contract
 /// a·b + c, so the sums are the same to the bit).
 #[inline]
@@ -837,6 +838,30 @@ mod tests {
             }
         }
         total
+    }
+
+    #[test]
+    fn the_correlation_runs_are_the_plain_loops_sums() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let mut z = || Complex32::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+        // Q' of 1, 7 (a vector's remainder) and 120, repeated k = 1 and 3 times along the column.
+        for (qs, k) in [(1, 1), (7, 3), (120, 1), (120, 3)] {
+            let start: Vec<Complex32> = (0..qs).map(|_| z()).collect();
+            let y: Vec<Complex32> = (0..qs * k).map(|_| z()).collect();
+            let kernel: Vec<Complex32> = (0..qs * k).map(|_| z()).collect();
+            let mut folded = start.clone();
+            correlate_runs(&mut folded, &y, &kernel);
+            let mut plain = start;
+            for i in 0..qs * k {
+                plain[i % qs] += y[i] * kernel[i].conj();
+            }
+            for (b, (f, p)) in folded.iter().zip(&plain).enumerate() {
+                assert!(
+                    f.re.to_bits() == p.re.to_bits() && f.im.to_bits() == p.im.to_bits(),
+                    "Q' {qs}, k {k}, frequency {b}: {f} against {p}"
+                );
+            }
+        }
     }
 
     #[test]
