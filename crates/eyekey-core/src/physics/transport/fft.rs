@@ -371,8 +371,9 @@ fn view_spectra_into(
 }
 
 /// Σ Σ_v K̂_v · FFT(L_v↑) over the (kernels, view spectra) pairs given (each pair's kernels per view, its views'
-/// [`view_spectra`]), one column of frequencies at a time, where FFT(L_v↑)[fx, fy] = FFT'(L_v)[fx mod P',
-/// fy mod Q'] and the columns past P'/2 follow from the spectrum's symmetry, X[a, b] = conj(X[P' − a, −b]).
+/// [`view_spectra`]), in blocks of [`PRODUCT_COLUMNS`] columns of frequencies, where FFT(L_v↑)[fx, fy] =
+/// FFT'(L_v)[fx mod P', fy mod Q'] and the columns past P'/2 follow from the spectrum's symmetry,
+/// X[a, b] = conj(X[P' − a, −b]).
 fn spectrum_product<'a>(
     plan: &FftPlan,
     small: &FftPlan,
