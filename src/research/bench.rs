@@ -1056,7 +1056,7 @@ impl BenchRun<'_> {
                 )?;
             }
         }
-        // The problem the `paper` encode solves: wave optics, two observers.
+        // A problem of the kind the `paper` encode solves: wave optics, two observers.
         let wave = BenchProblem::with_optics(&self.display, 2, self.args.sub_rays, Optics::Wave)?;
         body.push_str(&solver_bench(&wave, &format!("{} wave multiplex", self.args.preset))?.0);
         body.push_str(

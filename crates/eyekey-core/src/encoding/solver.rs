@@ -362,7 +362,7 @@ pub fn minimise_judged(
     let mut x_new = vec![0f32; n];
     let mut grad = vec![0f32; n];
     let mut t = 1.0f64;
-    let (mut history, mut restarts, mut calm, mut iterations) = (Vec::new(), 0, 0, 0);
+    let (mut history, mut restarts, mut calm, mut iterations) = (Vec::new(), 0, Calm::default(), 0);
     let mut termination = Termination::MaxIterations;
     let mut f_x = f64::INFINITY;
     for k in 0..options.max_iterations {
@@ -414,14 +414,9 @@ pub fn minimise_judged(
             max_iterations: options.max_iterations,
             objective: f_y,
         });
-        if f_prev.is_finite() && (f_prev - f_y).abs() <= options.tolerance * f_y.abs().max(1e-30) {
-            calm += 1;
-            if calm >= options.patience && iterations >= options.min_iterations {
-                termination = Termination::Converged;
-                break;
-            }
-        } else {
-            calm = 0;
+        if calm.converged(f_prev, f_y, iterations, options) {
+            termination = Termination::Converged;
+            break;
         }
         if let Some(c) = checkpoint.as_mut() {
             if iterations % c.every == 0 && iterations < options.max_iterations && (c.stop)(iterations, &x) {
@@ -439,6 +434,25 @@ pub fn minimise_judged(
         lipschitz,
         termination,
         seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+/// The stopping test of both solvers: |f_k − f_{k−1}| ≤ tolerance·|f_k| for `patience` consecutive iterations,
+/// and not before `min_iterations` ([`SolverOptions`]).
+#[derive(Default)]
+struct Calm(u32);
+
+impl Calm {
+    /// Counts iteration `iterations` (objective `f`, the one before `f_prev`, infinite before the first) and
+    /// answers whether the solve has converged.
+    fn converged(&mut self, f_prev: f64, f: f64, iterations: u32, options: &SolverOptions) -> bool {
+        if f_prev.is_finite() && (f_prev - f).abs() <= options.tolerance * f.abs().max(1e-30) {
+            self.0 += 1;
+            self.0 >= options.patience && iterations >= options.min_iterations
+        } else {
+            self.0 = 0;
+            false
+        }
     }
 }
 
@@ -554,7 +568,8 @@ const SPG_MEMORY: usize = 10;
 /// Lipschitz estimate: the first α is 1/‖Π(x − ∇f) − x‖∞ (the paper's choice). It stops as [`minimise`] does
 /// (relative change of f for `patience` iterations, the cap, the cancel flag, a non-finite objective) or where
 /// ⟨∇f, d⟩ ≥ 0 (x is stationary in the box). An alternative to FISTA measured by `eyekey bench --section
-/// solver`; `restarts` counts the line search's backtracks (each one objective evaluation more).
+/// solver`; in its result `restarts` counts the line search's backtracks (each one objective evaluation more)
+/// and `lipschitz` is 1/α of the last step.
 pub fn minimise_spg(
     obj: &dyn Objective,
     x0: Vec<f32>,
@@ -585,7 +600,7 @@ pub fn minimise_spg(
         1.0
     };
     let mut recent = std::collections::VecDeque::from([f]);
-    let (mut history, mut backtracks, mut calm, mut iterations) = (Vec::new(), 0u32, 0u32, 0u32);
+    let (mut history, mut backtracks, mut calm, mut iterations) = (Vec::new(), 0u32, Calm::default(), 0u32);
     let mut termination = if f.is_finite() {
         Termination::MaxIterations
     } else {
@@ -687,14 +702,9 @@ pub fn minimise_spg(
             max_iterations: options.max_iterations,
             objective: f,
         });
-        if (f_prev - f).abs() <= options.tolerance * f.abs().max(1e-30) {
-            calm += 1;
-            if calm >= options.patience && iterations >= options.min_iterations {
-                termination = Termination::Converged;
-                break;
-            }
-        } else {
-            calm = 0;
+        if calm.converged(f_prev, f, iterations, options) {
+            termination = Termination::Converged;
+            break;
         }
     }
     SolveResult {
