@@ -588,7 +588,8 @@ pub fn minimise_spg(
     let mut x: Vec<f32> = x0.into_par_iter().map(project).collect();
     let mut g = vec![0f32; n];
     let mut f = obj.value_and_gradient(&x, &mut g);
-    let (mut x_new, mut g_new, mut d) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+    // `p` holds Π(x − α∇f), the end of the projected step; the direction is d = p − x.
+    let (mut x_new, mut g_new, mut p) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
     let largest_step = x
         .par_iter()
         .zip(g.par_iter())
@@ -606,28 +607,25 @@ pub fn minimise_spg(
     } else {
         Termination::NumericalFailure
     };
-    'iterations: for k in 0..options.max_iterations {
-        if termination == Termination::NumericalFailure {
-            break;
-        }
+    // No iteration from a non-finite start.
+    let cap = if f.is_finite() { options.max_iterations } else { 0 };
+    'iterations: for k in 0..cap {
         if cancel.load(Ordering::Relaxed) {
             termination = Termination::Cancelled;
             break;
         }
-        // d = Π(x − α∇f) − x and ⟨∇f, d⟩, per chunk in f64, added in the chunks' order.
+        // p = Π(x − α∇f) and ⟨∇f, p − x⟩, per chunk in f64 ([`inner_difference`]), added in the chunks' order.
         let a = alpha as f32;
-        let slope: f64 = d
+        let slope: f64 = p
             .par_chunks_mut(PASS_CHUNK)
             .enumerate()
-            .map(|(i, d)| {
+            .map(|(i, p)| {
                 let at = i * PASS_CHUNK;
-                let (x, g) = (&x[at..at + d.len()], &g[at..at + d.len()]);
-                let mut sum = 0f64;
-                for ((di, xi), gi) in d.iter_mut().zip(x).zip(g) {
-                    *di = project(xi - a * gi) - xi;
-                    sum += *gi as f64 * *di as f64;
+                let (x, g) = (&x[at..at + p.len()], &g[at..at + p.len()]);
+                for ((pi, xi), gi) in p.iter_mut().zip(x).zip(g) {
+                    *pi = project(xi - a * gi);
                 }
-                sum
+                inner_difference(g, p, x)
             })
             .collect::<Vec<f64>>()
             .iter()
@@ -642,8 +640,8 @@ pub fn minimise_spg(
             let l = lambda as f32;
             x_new
                 .par_iter_mut()
-                .zip(x.par_iter().zip(d.par_iter()))
-                .for_each(|(xn, (xi, di))| *xn = project(xi + l * di));
+                .zip(x.par_iter().zip(p.par_iter()))
+                .for_each(|(xn, (xi, pi))| *xn = project(xi + l * (pi - xi)));
             let f_trial = obj.value_and_gradient(&x_new, &mut g_new);
             if !f_trial.is_finite() {
                 termination = Termination::NumericalFailure;
