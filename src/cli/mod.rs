@@ -231,8 +231,8 @@ pub enum ExperimentCommand {
         /// Instead of the default: the known-font margin the target guard asks of the target's view.
         #[arg(long)]
         target_margin: Option<f64>,
-        /// Instead of the default (1): the encoder's seed, which draws the population decoys, the noise they are
-        /// shown and the kernels' sub-rays (the held-out targets and people stay the same).
+        /// Instead of the experiments' fixed seed (1): the encoder's seed, which draws the population decoys, the
+        /// noise they are shown and the kernels' sub-rays (the held-out targets and people stay the same).
         #[arg(long)]
         seed: Option<u64>,
         /// Instead of the default: rounds that add as decoys the sampled candidates who still read
@@ -350,7 +350,9 @@ pub struct EncodeArgs {
     /// The known-font margin the target guard asks of the target's view (`target_margin`).
     #[arg(long)]
     pub target_margin: Option<f64>,
-    /// Seed for sampling and jitter.
+    /// The encoder's seed, to reproduce an earlier encode (its `encoding.json` names it) or for experiments only.
+    /// Without it (the default), a fresh seed is drawn from the operating system's CSPRNG: a seed anybody knows
+    /// is a noise pattern an attacker can learn and subtract from the frames.
     #[arg(long)]
     pub seed: Option<u64>,
     /// The document (PNG or JPEG).
@@ -582,11 +584,10 @@ pub fn run(cli: Cli) -> Result<()> {
             eye_y,
             out,
         }) => {
-            let m = crate::client::track_bundle(&bundle, eye_x, eye_y, &out)?;
+            let (mu, mv) = crate::client::track_bundle(&bundle, eye_x, eye_y, &out)?;
             println!(
-                "wrote {} re-indexed by {} views for the eye at ({eye_x}, {eye_y}) mm",
-                out.display(),
-                m.encoder["tracked_view_shift"]
+                "wrote {} re-indexed by ({mu}, {mv}) views for the eye at ({eye_x}, {eye_y}) mm",
+                out.display()
             );
         }
         Command::Simulate(a) => simulate(&a)?,
@@ -723,7 +724,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 sub_rays: sub_rays.unwrap_or(d.sub_rays),
                 target_margin: target_margin.unwrap_or(d.target_margin),
                 adaptive_rounds: adaptive_rounds.unwrap_or(d.adaptive_rounds),
-                seed: seed.unwrap_or(d.seed),
+                seed: Some(seed.unwrap_or(crate::research::EXPERIMENT_SEED)),
                 ..d
             };
             print!(
@@ -881,7 +882,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         decoy_weight: a.decoy_weight.or(d.decoy_weight),
         leak_weight: a.leak_weight.unwrap_or(d.leak_weight),
         ensure_target_reads: !a.no_target_guard,
-        seed: a.seed.unwrap_or(d.seed),
+        seed: a.seed,
         sub_rays: a.sub_rays.unwrap_or(d.sub_rays),
         max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
         tolerance: a.tolerance.unwrap_or(d.tolerance),
@@ -916,11 +917,13 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     eyekey_core::encoding::pipeline::write_outputs(&spec, &encoded, &a.out, false, &cache, &|_| {}, &cancel)?;
     bar.finish_and_clear();
     eprintln!(
-        "wrote {} in {:.1} s (solver: {} iterations, {})",
+        "wrote {} in {:.1} s (solver: {} iterations, {}; {} seed in {}, never in the bundle)",
         a.out.display(),
         started.elapsed().as_secs_f64(),
         encoded.solver.iterations,
-        encoded.solver.termination
+        encoded.solver.termination,
+        if a.seed.is_some() { "the given" } else { "a fresh" },
+        a.out.join(eyekey_core::encoding::pipeline::ENCODING_FILE).display()
     );
     Ok(())
 }

@@ -149,23 +149,15 @@ fn write_preview(
         profile,
         EyePosition::default(),
         &options,
-        bundle_optics(manifest),
+        // The physics a real eye sees through, whatever model the frames were encoded under: the manifest does
+        // not say (it carries nothing of the encoder), and the preview should not flatter them.
+        Optics::Wave,
         &eyekey_core::physics::transport::TransportCache::disabled(),
     )
     .map_err(|e| ClientError::Preview(e.to_string()))?;
     let picture = observer.picture(&observer.view(light_field));
     eyekey_core::imaging::save_rgb_png(&picture, &staging.join(PREVIEW_FILE))
         .map_err(|e| ClientError::Preview(error_chain(&e)))
-}
-
-/// The forward model a bundle's frames were encoded under, from its manifest's encoder options; bundles
-/// from before eyekey modelled diffraction name none and were encoded under geometric optics.
-fn bundle_optics(manifest: &bundle::Manifest) -> Optics {
-    manifest
-        .encoder
-        .get("optics")
-        .and_then(|v| serde_json::from_value(v.clone()).ok())
-        .unwrap_or(Optics::Geometric)
 }
 
 /// The swap: `previous` is dropped, `current` becomes `previous`, the staging directory becomes `current`.

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use eyekey_core::bundle::{read_verified_bundle, write_bundle, BundleMeta, Manifest};
+use eyekey_core::bundle::{read_verified_bundle, write_bundle};
 use eyekey_core::physics::tracking::{retarget, view_shift};
 use eyekey_core::physics::transport::EyePosition;
 
@@ -14,9 +14,8 @@ use eyekey_core::physics::transport::EyePosition;
 pub const MAX_TRACKED_OFFSET_MM: f64 = 50.0;
 
 /// Writes into `out` (a new directory) the bundle at `bundle` re-indexed for an eye at (`x_mm`, `y_mm`) from the
-/// design position, at the design distance; returns its manifest. The encoder record gains the tracked position
-/// and the view shift.
-pub fn track_bundle(bundle: &Path, x_mm: f64, y_mm: f64, out: &Path) -> Result<Manifest> {
+/// design position, at the design distance; returns the view shift (views in u and v) the frames moved by.
+pub fn track_bundle(bundle: &Path, x_mm: f64, y_mm: f64, out: &Path) -> Result<(i64, i64)> {
     if !(x_mm.is_finite() && y_mm.is_finite()) || x_mm.hypot(y_mm) > MAX_TRACKED_OFFSET_MM {
         bail!(
             "the tracked eye must be within {MAX_TRACKED_OFFSET_MM} mm of the design position, got ({x_mm}, {y_mm}) mm"
@@ -26,19 +25,9 @@ pub fn track_bundle(bundle: &Path, x_mm: f64, y_mm: f64, out: &Path) -> Result<M
     let display = &b.manifest.display;
     let eye = EyePosition { x_mm, y_mm, dz_mm: 0.0 };
     let l = retarget(display, &b.light_field, eye);
-    let (mu, mv) = view_shift(display, eye);
-    let mut encoder = b.manifest.encoder.clone();
-    if let Some(map) = encoder.as_object_mut() {
-        map.insert("tracked_eye_mm".into(), serde_json::json!([x_mm, y_mm]));
-        map.insert("tracked_view_shift".into(), serde_json::json!([mu, mv]));
-    }
-    let meta = BundleMeta {
-        profile_label: b.manifest.profile_label.clone(),
-        encoder,
-        solver: b.manifest.solver.clone(),
-    };
-    write_bundle(out, display, &l, &meta, &[], b.manifest.barrier_mask_pixels_per_hole)
-        .with_context(|| format!("writing {}", out.display()))
+    write_bundle(out, display, &l, &[], b.manifest.barrier_mask_pixels_per_hole)
+        .with_context(|| format!("writing {}", out.display()))?;
+    Ok(view_shift(display, eye))
 }
 
 #[cfg(test)]
@@ -57,14 +46,9 @@ mod tests {
         let l: Vec<f32> = (0..n).map(|i| ((i * 37) % 101) as f32 / 100.0).collect();
         let dir = tempfile::tempdir().unwrap();
         let src = dir.path().join("src");
-        let meta = BundleMeta {
-            encoder: serde_json::json!({"method": "multiplex"}),
-            ..Default::default()
-        };
-        write_bundle(&src, &display, &l, &meta, &[], 4).unwrap();
+        write_bundle(&src, &display, &l, &[], 4).unwrap();
         let out = dir.path().join("tracked");
-        let m = track_bundle(&src, 1.8, -0.6, &out).unwrap();
-        assert_eq!(m.encoder["tracked_view_shift"], serde_json::json!([3, -1]));
+        assert_eq!(track_bundle(&src, 1.8, -0.6, &out).unwrap(), (3, -1));
         let (_, back) = eyekey_core::bundle::read_bundle(&out).unwrap();
         // Frames are 16-bit PNGs: the round trip is exact to 1/65535 of L_max.
         let want = retarget(

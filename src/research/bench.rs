@@ -1104,6 +1104,7 @@ impl BenchRun<'_> {
                 decoy_weight: Some(1.0),
                 leak_weight: 0.0,
                 ensure_target_reads: false,
+                seed: Some(crate::research::EXPERIMENT_SEED),
                 ..Default::default()
             },
         }
@@ -1130,6 +1131,7 @@ impl BenchRun<'_> {
                     .near_pupil_decoys
                     .unwrap_or(EncodeOptions::default().near_pupil_decoys),
                 decoy_weight: self.args.decoy_weight,
+                seed: Some(crate::research::EXPERIMENT_SEED),
                 ..Default::default()
             },
         };

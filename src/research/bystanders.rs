@@ -149,7 +149,7 @@ impl Baseline {
             ensure_target_reads: false,
             max_iterations,
             sub_rays: 12,
-            seed: 5,
+            seed: Some(5),
             optics: Optics::Wave,
             ..Default::default()
         }
@@ -168,7 +168,7 @@ impl Baseline {
                 head_radius_mm: e.head_radius_mm,
                 head_positions: e.head_positions,
                 head_weight: e.head_weight,
-                seed: e.seed,
+                seed: Some(e.seed),
                 leak_weight: e.leak_weight,
                 camera_decoys: e.cameras,
                 camera_decoy_focus_d: e.camera_focus_d.to_vec(),

@@ -317,7 +317,7 @@ impl<'a> Views<'a> {
                 decoy: DecoyKind::Noise,
                 decoy_weight: Some(weight),
                 optics: self.setup.optics,
-                seed: self.seed.wrapping_mul(1000).wrapping_add(e as u64),
+                seed: Some(self.seed.wrapping_mul(1000).wrapping_add(e as u64)),
                 sub_rays: self.setup.sub_rays,
                 max_iterations: self.setup.max_iterations,
                 evaluation_population: 0,

@@ -256,6 +256,7 @@ impl PaperSetup {
             decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
+            seed: Some(crate::research::EXPERIMENT_SEED),
             ..Default::default()
         });
         let t = Instant::now();
@@ -284,6 +285,7 @@ impl PaperSetup {
             decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
+            seed: Some(crate::research::EXPERIMENT_SEED),
             ..Default::default()
         });
         let cancel = AtomicBool::new(false);
@@ -740,7 +742,7 @@ fn sweep_spec(c: &SweepConfig, target: &VisionProfile, document: &RgbImage, max_
             decoy_weight: Some(c.decoy_weight),
             max_iterations,
             sub_rays: 12,
-            seed: 5,
+            seed: Some(5),
             adaptive_rounds: c.adaptive_rounds,
             adaptive_candidates: 32,
             adaptive_per_round: 6,
@@ -1141,6 +1143,7 @@ pub fn secure(out: &Path, population: u32) -> Result<String> {
         // The default options (the encoder frontier's, docs/experiments.md §2d) and the slip's text hint.
         options: EncodeOptions {
             document_text: Some(pin_slip_text(g.0)),
+            seed: Some(crate::research::EXPERIMENT_SEED),
             ..Default::default()
         },
     };

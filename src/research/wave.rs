@@ -122,6 +122,7 @@ pub fn run(out: &Path, display: &DisplayGeometry, label: &str, fourier: bool) ->
             decoy_weight: Some(1.0),
             leak_weight: 0.0,
             ensure_target_reads: false,
+            seed: Some(crate::research::EXPERIMENT_SEED),
             ..Default::default()
         },
     };

@@ -46,6 +46,7 @@ use super::routes;
         routes::jobs::delete_job,
         routes::jobs::job_events,
         routes::evaluation::get_evaluation,
+        routes::evaluation::get_encoding,
         routes::evaluation::list_views,
         routes::evaluation::get_view,
         routes::frames::list_frame_jobs,

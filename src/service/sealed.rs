@@ -135,25 +135,49 @@ pub fn seal_to_file(path: &Path, key: &DataKey, aad: &[u8], plain: &[u8]) -> std
     write_file(path, &sealed)
 }
 
-/// A job's options split for storage: the JSON kept in clear (`jobs.options`) and, when the options carry
-/// the document's text hint, that hint's JSON, to be sealed (`jobs.sealed_options`).
+/// The part of a job's options sealed under its key (`jobs.sealed_options`): the document's text hint and the
+/// encoder's seed. Either gives away what the frames hide: the text is the secret itself, and the seed is the
+/// decoys' noise, which an attacker who knew it could subtract.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SecretOptions {
+    #[serde(default)]
+    document_text: Option<eyekey_core::evaluation::DocumentText>,
+    #[serde(default)]
+    seed: Option<u64>,
+}
+
+/// A job's options split for storage: the JSON kept in clear (`jobs.options`), without the document's text hint
+/// or the seed, and, when the options carry either, their JSON, to be sealed (`jobs.sealed_options`).
 pub fn split_options(options: &EncodeOptions) -> serde_json::Result<(String, Option<Vec<u8>>)> {
-    let secret = match &options.document_text {
-        Some(text) => Some(serde_json::to_vec(text)?),
-        None => None,
+    let secret = SecretOptions {
+        document_text: options.document_text.clone(),
+        seed: options.seed,
+    };
+    let secret = match (&secret.document_text, secret.seed) {
+        (None, None) => None,
+        _ => Some(serde_json::to_vec(&secret)?),
     };
     let clear = EncodeOptions {
         document_text: None,
+        seed: None,
         ..options.clone()
     };
     Ok((serde_json::to_string(&clear)?, secret))
 }
 
-/// The options [`split_options`] split, joined again (`secret` already opened).
+/// The options [`split_options`] split, joined again (`secret` already opened). A sealed part that is a bare
+/// text hint, as jobs stored before the seed was sealed hold, is read as such (their seed is in the clear part).
 pub fn join_options(clear: &str, secret: Option<&[u8]>) -> serde_json::Result<EncodeOptions> {
     let mut options: EncodeOptions = serde_json::from_str(clear)?;
     if let Some(secret) = secret {
-        options.document_text = Some(serde_json::from_slice(secret)?);
+        match serde_json::from_slice::<SecretOptions>(secret) {
+            Ok(s) => {
+                options.document_text = s.document_text;
+                options.seed = s.seed.or(options.seed);
+            }
+            Err(_) => options.document_text = Some(serde_json::from_slice(secret)?),
+        }
     }
     Ok(options)
 }
@@ -242,28 +266,49 @@ mod tests {
     }
 
     #[test]
-    fn options_keep_the_document_text_out_of_the_clear_part_and_join_back_whole() {
+    fn options_keep_the_document_text_and_the_seed_out_of_the_clear_part_and_join_back_whole() {
         let options = EncodeOptions {
             document_text: Some(eyekey_core::evaluation::DocumentText {
                 lines: vec!["PIN".into(), "4821".into()],
                 scale: 4,
                 alphabet: "0123456789".into(),
             }),
+            seed: Some(0x5EC2_E75E_ED00_u64),
             ..Default::default()
         };
         let (clear, secret) = split_options(&options).unwrap();
         assert!(!clear.contains("4821"), "{clear}");
-        assert!(String::from_utf8(secret.clone().unwrap()).unwrap().contains("4821"));
+        let clear_json: serde_json::Value = serde_json::from_str(&clear).unwrap();
+        assert_eq!(clear_json["seed"], serde_json::Value::Null, "{clear}");
+        assert!(!clear.contains(&0x5EC2_E75E_ED00_u64.to_string()), "{clear}");
+        let secret_text = String::from_utf8(secret.clone().unwrap()).unwrap();
+        assert!(secret_text.contains("4821") && secret_text.contains(&0x5EC2_E75E_ED00_u64.to_string()));
         let back = join_options(&clear, secret.as_deref()).unwrap();
-        assert_eq!(
-            serde_json::to_value(&back).unwrap(),
-            serde_json::to_value(&options).unwrap()
-        );
+        assert_eq!(back, options);
+        // A seed alone is sealed too.
+        let seeded = EncodeOptions {
+            seed: Some(7),
+            ..Default::default()
+        };
+        let (clear, secret) = split_options(&seeded).unwrap();
+        assert!(secret.is_some());
+        assert_eq!(join_options(&clear, secret.as_deref()).unwrap(), seeded);
         let (clear, secret) = split_options(&EncodeOptions::default()).unwrap();
         assert!(secret.is_none());
-        assert_eq!(
-            serde_json::to_value(join_options(&clear, None).unwrap()).unwrap(),
-            serde_json::to_value(EncodeOptions::default()).unwrap()
-        );
+        assert_eq!(join_options(&clear, None).unwrap(), EncodeOptions::default());
+    }
+
+    #[test]
+    fn a_job_stored_with_a_bare_text_hint_and_a_clear_seed_still_opens() {
+        let hint = eyekey_core::evaluation::DocumentText {
+            lines: vec!["PIN".into(), "4821".into()],
+            scale: 4,
+            alphabet: "0123456789".into(),
+        };
+        let clear = serde_json::json!({ "seed": 1 }).to_string();
+        let secret = serde_json::to_vec(&hint).unwrap();
+        let back = join_options(&clear, Some(&secret)).unwrap();
+        assert_eq!(back.seed, Some(1));
+        assert_eq!(back.document_text, Some(hint));
     }
 }

@@ -141,7 +141,7 @@ pub async fn whole_flow(app: &TestApp) {
         serde_json::from_value(last["options"].clone()).unwrap();
     let transport = eyekey_core::physics::transport::TransportOptions {
         sub_rays: options.sub_rays,
-        seed: options.seed.wrapping_add(20_000) ^ 0xE7A1,
+        seed: options.seed.expect("the job states its seed").wrapping_add(20_000) ^ 0xE7A1,
         ..Default::default()
     };
     let observer = eyekey_core::physics::observer::Observer::new(

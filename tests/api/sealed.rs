@@ -549,3 +549,106 @@ async fn a_job_options_hint_is_sealed_and_a_request_digest_is_keyed() {
     assert!(!contains(&sealed, b"4821"));
     assert_eq!(hash.len(), 64);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_job_draws_a_seed_of_its_own_kept_sealed_from_displays_and_a_given_seed_reproduces_its_frames() {
+    let app = spawn_app_with(|c| c.workers = 1).await;
+    let f = app.fixtures().await;
+    let body = crate::helpers::job_body(&f);
+    let (a, b) = (finished(&app, &body).await, finished(&app, &body).await);
+    let seed_of = |job: &Value| {
+        job["options"]["seed"]
+            .as_u64()
+            .expect("the operator sees the job's seed")
+    };
+    let (seed_a, seed_b) = (seed_of(&app.job(&a).await), seed_of(&app.job(&b).await));
+    assert_ne!(seed_a, seed_b, "two jobs of the same request share a seed");
+    let frame = |id: String| {
+        let (app, token) = (&app, f.display_token.clone());
+        async move {
+            bytes_of(
+                app.display_get(&token, &format!("/v1/frames/jobs/{id}/files/frame_0.png"))
+                    .await,
+            )
+            .await
+        }
+    };
+    let frame_a = frame(a.clone()).await;
+    assert_ne!(
+        frame_a,
+        frame(b.clone()).await,
+        "two jobs of the same request gave the same frames"
+    );
+
+    // The operator's record of the encode names the seed; the job's clear options do not, nor any file at rest.
+    let record = expect_json(app.op_get(&format!("/v1/jobs/{a}/encoding")).await, StatusCode::OK).await;
+    assert_eq!(record["options"]["seed"].as_u64(), Some(seed_a), "{record}");
+    assert!(record["solver"]["iterations"].as_u64().is_some(), "{record}");
+    let row = app.job_row(&a).await;
+    let clear: Value = serde_json::from_str(&row.options).unwrap();
+    assert!(clear["seed"].is_null(), "the seed is stored in clear: {clear}");
+    for seed in [seed_a, seed_b] {
+        for (path, bytes) in every_file(&app.data_dir) {
+            assert!(
+                !contains(&bytes, seed.to_string().as_bytes()),
+                "{path} holds a job's seed in clear"
+            );
+        }
+    }
+
+    // What a display receives: the frames, the mask and a manifest of the display's own fields, no option.
+    let token = &f.display_token;
+    let manifest = bytes_of(
+        app.display_get(token, &format!("/v1/frames/jobs/{a}/files/manifest.json"))
+            .await,
+    )
+    .await;
+    let manifest: Value = serde_json::from_slice(&manifest).unwrap();
+    let mut keys: Vec<&str> = manifest.as_object().unwrap().keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(
+        keys,
+        [
+            "barrier_mask_pixels_per_hole",
+            "display",
+            "files",
+            "format_version",
+            "frame_height",
+            "frame_width",
+            "n_frames"
+        ]
+    );
+    let zip = bytes_of(app.display_get(token, &format!("/v1/frames/jobs/{a}/bundle.zip")).await).await;
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(zip)).unwrap();
+    let mut names: Vec<String> = archive.file_names().map(str::to_string).collect();
+    names.sort();
+    assert!(
+        names
+            .iter()
+            .all(|n| n == "manifest.json" || n == "barrier_mask.png" || n.starts_with("frame_")),
+        "{names:?}"
+    );
+    for k in 0..archive.len() {
+        let mut file = archive.by_index(k).unwrap();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut file, &mut bytes).unwrap();
+        assert!(
+            !contains(&bytes, seed_a.to_string().as_bytes()),
+            "{} holds the seed",
+            file.name()
+        );
+        assert!(!contains(&bytes, b"\"seed\""), "{} names a seed", file.name());
+    }
+    assert_eq!(
+        app.display_get(token, &format!("/v1/frames/jobs/{a}/files/encoding.json"))
+            .await
+            .status(),
+        StatusCode::NOT_FOUND
+    );
+
+    // The same request with the first job's seed gives its frames again.
+    let mut seeded = body.clone();
+    seeded["options"]["seed"] = json!(seed_a);
+    let c = finished(&app, &seeded).await;
+    assert_eq!(frame(c).await, frame_a);
+}

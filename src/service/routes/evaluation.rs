@@ -1,5 +1,5 @@
 //! Evaluation of a succeeded job (operator only): the report and the simulated views of the target,
-//! the observers and a sample of the population.
+//! the observers and a sample of the population, and the record of how the frames were encoded.
 
 use axum::extract::State;
 use axum::response::Response;
@@ -21,6 +21,7 @@ use crate::service::store::{self, jobs::JobRow, jobs::JobState};
 pub fn router() -> Router<AppState> {
     Router::new()
         .route("/v1/jobs/{id}/evaluation", get(get_evaluation))
+        .route("/v1/jobs/{id}/encoding", get(get_encoding))
         .route("/v1/jobs/{id}/views", get(list_views))
         .route("/v1/jobs/{id}/views/{name}", get(get_view))
 }
@@ -71,6 +72,37 @@ pub async fn get_evaluation(
         "application/json",
         None,
         "evaluation report",
+    )
+    .await
+}
+
+/// How the job's frames were encoded (`encoding.json`): the options as run, with the seed the encode drew its
+/// decoys, noise and kernels from, the target's profile label and the solver's record. An operator's: a display
+/// never receives it.
+#[utoipa::path(
+    get, path = "/v1/jobs/{id}/encoding", tag = "evaluation",
+    params(("id" = Uuid, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The record", content_type = "application/json", body = Object),
+        (status = 401, description = "No or unknown token", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has not succeeded", body = ErrorBody),
+    ),
+    security(("operator" = ["read-evaluation", "admin"]))
+)]
+pub async fn get_encoding(
+    State(state): State<AppState>,
+    _op: Operator<scope::ReadEvaluation>,
+    ApiPath(id): ApiPath<Uuid>,
+) -> Result<Response, ApiError> {
+    let job = succeeded(&state, &id).await?;
+    send_sealed(
+        &state,
+        &job,
+        eyekey_core::encoding::pipeline::ENCODING_FILE,
+        "application/json",
+        None,
+        "encoding record",
     )
     .await
 }

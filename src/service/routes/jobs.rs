@@ -108,7 +108,8 @@ pub struct JobView {
     pub observers: Vec<ObserverRef>,
     /// Encoder.
     pub method: Method,
-    /// Options in full (defaults filled in).
+    /// Options in full (defaults filled in, and the seed the job draws its decoys, noise and kernels from:
+    /// fresh for every job unless the request gave one; kept sealed, shown only to operators).
     pub options: EncodeOptions,
     /// Last error (of the final attempt when failed, else of an earlier retried attempt).
     pub last_error: Option<String>,
@@ -279,8 +280,9 @@ pub async fn create_job(
     }
     let request_hash = request_hash(&state.master_key, &body, &options)?;
     let (display, target, observers) = resolve_inputs(&state.db, &body).await?;
-    // The job states the options it runs with: the display's defaults filled in (the decoys' weight).
-    let options = options.for_display(&display);
+    // The job states the options it runs with: the display's defaults filled in (the decoys' weight), and a
+    // seed drawn for it from the operating system's CSPRNG unless one was given; sealed with the job.
+    let options = options.for_display(&display).with_fresh_seed();
     let warnings = resolvability_warnings(&Resolvability::of(&display));
     admit(&state.config, &display, &options, observers.len())?;
     let id = JobId::new_v4();

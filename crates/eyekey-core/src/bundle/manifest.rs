@@ -1,15 +1,27 @@
-//! The manifest: what a bundle holds and how it was made.
+//! The manifest: what a bundle holds, and nothing else.
 
 use crate::physics::display::DisplayGeometry;
 use serde::{Deserialize, Serialize};
 
-/// The contents of `manifest.json`: everything needed to show and to audit a bundle.
+/// The contents of `manifest.json`: what a display needs to show the frames and to check it has them whole, and
+/// nothing more. Each field and why the display needs it:
+///
+/// | field | why |
+/// | --- | --- |
+/// | `format_version` | to refuse a layout it does not know |
+/// | `display` | the geometry and projector spectra the frames are laid out for, checked against the display's own |
+/// | `frame_width`, `frame_height`, `n_frames` | the size and number of the frames, checked before they are decoded |
+/// | `barrier_mask_pixels_per_hole` | how to scale the barrier mask onto the barrier |
+/// | `files` | name, size, SHA-256 and role of every other file, so a damaged or missing file is refused |
+///
+/// Never the encoder's options or seed, the solver's record, the target's profile or its label, a time, or
+/// anything of the document: those stay with the operator (`encoding.json`, `report.json`), sealed in the
+/// service. Unknown fields are refused, so a manifest that carries more is not a bundle of this format.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Manifest {
     /// Layout version ([`FORMAT_VERSION`]).
     pub format_version: u32,
-    /// When the bundle was written, RFC 3339 in UTC.
-    pub created_at: String,
     /// The display the frames are for, including its projector spectra and L_max.
     pub display: DisplayGeometry,
     /// Width of every frame, pixels (X·U).
@@ -20,12 +32,6 @@ pub struct Manifest {
     pub n_frames: u32,
     /// Resolution of the barrier-mask PNG, pixels per hole pitch.
     pub barrier_mask_pixels_per_hole: u32,
-    /// Identifier and version of the target's profile; never the profile's contents.
-    pub profile_label: String,
-    /// The encoder: method and its parameters.
-    pub encoder: serde_json::Value,
-    /// Solver statistics: iterations, termination, final objective, time, ...
-    pub solver: serde_json::Value,
     /// Every file of the bundle except the manifest itself.
     pub files: Vec<FileEntry>,
 }
@@ -57,15 +63,4 @@ pub enum FileRole {
     BarrierMask,
     /// Anything else (a report, say): checksummed, otherwise not interpreted.
     Other,
-}
-
-/// What the caller records about an encode in the manifest.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct BundleMeta {
-    /// Identifier and version of the target's profile; never the profile's contents.
-    pub profile_label: String,
-    /// The encoder: method and its parameters (the serialised `EncodeOptions`).
-    pub encoder: serde_json::Value,
-    /// Solver statistics: iterations, termination, final objective, time, ...
-    pub solver: serde_json::Value,
 }

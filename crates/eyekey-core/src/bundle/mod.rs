@@ -6,9 +6,11 @@
 //! - the barrier mask, `barrier_mask.png`, 8-bit grey, 255 = open ([`DisplayGeometry::barrier_mask`]);
 //! - any extra files the caller adds (an evaluation report, say);
 //! - `manifest.json` ([`Manifest`]): format version, display geometry with its projector spectra and L_max,
-//!   the profile's label, encoder and solver records, and the SHA-256 and size of every other file. Never
-//!   anything of the document itself: not its text, not a hash of it (a hash of a PIN slip is the PIN, to
-//!   anyone who can render the ten thousand candidates).
+//!   the frames' size and number, the mask's resolution, and the SHA-256 and size of every other file: what a
+//!   display needs to show the frames, nothing more. Never the encoder's options or seed, the solver's record
+//!   or the target's profile label (an operator's, in `encoding.json` beside the bundle), and never anything of
+//!   the document itself: not its text, not a hash of it (a hash of a PIN slip is the PIN, to anyone who can
+//!   render the ten thousand candidates).
 //!
 //! The checksums catch corruption and accidental edits, not forgery: whoever can rewrite the files can
 //! rewrite the manifest too.
@@ -36,7 +38,7 @@ pub use write::*;
 use sha2::{Digest, Sha256};
 
 /// Version of the bundle layout written by [`write_bundle`]; [`read_bundle`] accepts only this one.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Name of the manifest inside a bundle.
 pub const MANIFEST_FILE: &str = "manifest.json";
@@ -101,19 +103,11 @@ mod tests {
             .collect()
     }
 
-    fn meta() -> BundleMeta {
-        BundleMeta {
-            profile_label: "alice@3".to_string(),
-            encoder: serde_json::json!({ "method": "multiplex" }),
-            solver: serde_json::json!({ "iterations": 12 }),
-        }
-    }
-
     fn write_small(dir: &Path) -> (DisplayGeometry, Vec<f32>, Manifest) {
         let d = small_display();
         let l = random_field(&d, 7);
         let extra = vec![("report.json".to_string(), b"{}".to_vec())];
-        let m = write_bundle(dir, &d, &l, &meta(), &extra, 4).unwrap();
+        let m = write_bundle(dir, &d, &l, &extra, 4).unwrap();
         (d, l, m)
     }
 
@@ -248,6 +242,36 @@ mod tests {
     }
 
     #[test]
+    fn a_manifest_that_carries_more_than_the_display_needs_is_refused() {
+        // A bundle of the first layout (which recorded the encoder's options, seed included) is refused for its
+        // version; one of this version with an extra field, for the field.
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("bundle");
+        write_small(&dir);
+        let path = dir.join(MANIFEST_FILE);
+        let edit = |f: &dyn Fn(&mut serde_json::Map<String, serde_json::Value>)| {
+            let mut m: serde_json::Value = serde_json::from_slice(&fs::read(&path).unwrap()).unwrap();
+            f(m.as_object_mut().unwrap());
+            fs::write(&path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+        };
+        let pristine = fs::read(&path).unwrap();
+        edit(&|m| {
+            m.insert("format_version".into(), 1.into());
+            m.insert("encoder".into(), serde_json::json!({ "seed": 1 }));
+        });
+        let err = read_bundle(&dir).unwrap_err().to_string();
+        assert!(err.contains("format version 1 is not supported"), "{err}");
+        fs::write(&path, &pristine).unwrap();
+        edit(&|m| {
+            m.insert("encoder".into(), serde_json::json!({ "seed": 1 }));
+        });
+        let err = read_bundle(&dir).unwrap_err().to_string();
+        assert!(err.contains("unknown field `encoder`"), "{err}");
+        fs::write(&path, &pristine).unwrap();
+        assert!(read_bundle(&dir).is_ok());
+    }
+
+    #[test]
     fn a_frame_of_the_wrong_size_is_a_geometry_error_even_with_a_matching_checksum() {
         // The checksum only proves the file is the one listed; its pixels must still fit the display.
         let root = tempfile::tempdir().unwrap();
@@ -277,7 +301,7 @@ mod tests {
         fs::create_dir(&dir).unwrap();
         fs::write(dir.join("keep.txt"), b"mine").unwrap();
         let d = small_display();
-        let err = write_bundle(&dir, &d, &random_field(&d, 1), &meta(), &[], 4).unwrap_err();
+        let err = write_bundle(&dir, &d, &random_field(&d, 1), &[], 4).unwrap_err();
         assert!(matches!(err, BundleError::NotEmpty { .. }), "{err}");
         assert_eq!(entries(root.path()), vec!["bundle"]);
         assert_eq!(entries(&dir), vec!["keep.txt"]);
@@ -304,11 +328,11 @@ mod tests {
         let d = small_display();
         let l = random_field(&d, 2);
         let traversal = vec![("../x".to_string(), b"x".to_vec())];
-        let err = write_bundle(&dir, &d, &l, &meta(), &traversal, 4).unwrap_err();
+        let err = write_bundle(&dir, &d, &l, &traversal, 4).unwrap_err();
         assert!(matches!(err, BundleError::UnsafeName { .. }), "{err}");
         assert!(entries(root.path()).is_empty());
         let too_long = vec![("r".repeat(300), b"x".to_vec())];
-        let err = write_bundle(&dir, &d, &l, &meta(), &too_long, 4).unwrap_err();
+        let err = write_bundle(&dir, &d, &l, &too_long, 4).unwrap_err();
         assert!(matches!(err, BundleError::Io { .. }), "{err}");
         assert!(entries(root.path()).is_empty(), "{:?}", entries(root.path()));
         assert!(!root.path().join("x").exists());
@@ -322,11 +346,11 @@ mod tests {
         let d = small_display();
         let mut l = random_field(&d, 3);
         l.truncate(l.len() - d.n_samples_per_band());
-        let err = write_bundle(&dir, &d, &l, &meta(), &[], 4).unwrap_err();
+        let err = write_bundle(&dir, &d, &l, &[], 4).unwrap_err();
         assert!(matches!(err, BundleError::LightField { .. }), "{err}");
         assert!(entries(root.path()).is_empty());
         l.extend(std::iter::repeat_n(f32::NAN, d.n_samples_per_band()));
-        let err = write_bundle(&dir, &d, &l, &meta(), &[], 4).unwrap_err();
+        let err = write_bundle(&dir, &d, &l, &[], 4).unwrap_err();
         assert!(matches!(err, BundleError::LightField { .. }), "{err}");
     }
 

@@ -114,6 +114,14 @@ pub(crate) fn read_manifest(source: &mut Source) -> Result<(Vec<u8>, Manifest, L
             limit: MAX_MANIFEST_BYTES,
         });
     }
+    // The version first, so that a bundle of another layout is refused as such, not for a field it names.
+    #[derive(serde::Deserialize)]
+    struct Version {
+        format_version: u32,
+    }
+    let version: Version =
+        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
+    check_version(version.format_version)?;
     let manifest: Manifest =
         serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
     let layout = check_manifest(&manifest)?;
@@ -128,16 +136,19 @@ pub(crate) struct Layout {
     mask: usize,
 }
 
+/// Refuses a layout version other than [`FORMAT_VERSION`].
+fn check_version(version: u32) -> Result<(), BundleError> {
+    if version == FORMAT_VERSION {
+        return Ok(());
+    }
+    Err(BundleError::Manifest {
+        reason: format!("format version {version} is not supported (this reader knows {FORMAT_VERSION})"),
+    })
+}
+
 /// Checks the manifest on its own: version, names, limits, and that display, frames and mask agree.
 pub(crate) fn check_manifest(m: &Manifest) -> Result<Layout, BundleError> {
-    if m.format_version != FORMAT_VERSION {
-        return Err(BundleError::Manifest {
-            reason: format!(
-                "format version {} is not supported (this reader knows {FORMAT_VERSION})",
-                m.format_version
-            ),
-        });
-    }
+    check_version(m.format_version)?;
     check_files(m)?;
     check_geometry(m)?;
     let layout = roles_of(m)?;

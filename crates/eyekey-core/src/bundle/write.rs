@@ -2,8 +2,8 @@
 
 use crate::bundle::{
     check_plain_name, check_target_dir, frame_file_name, geometry, sha256_hex, write_dir_atomically, BundleError,
-    BundleMeta, FileEntry, FileRole, Manifest, FORMAT_VERSION, MANIFEST_FILE, MASK_FILE, MAX_BUNDLE_BYTES,
-    MAX_FILE_BYTES, MAX_MASK_PIXELS, MAX_MASK_PIXELS_PER_HOLE,
+    FileEntry, FileRole, Manifest, FORMAT_VERSION, MANIFEST_FILE, MASK_FILE, MAX_BUNDLE_BYTES, MAX_FILE_BYTES,
+    MAX_MASK_PIXELS, MAX_MASK_PIXELS_PER_HOLE,
 };
 use crate::imaging::grey16;
 use crate::physics::display::DisplayGeometry;
@@ -31,13 +31,12 @@ pub fn write_bundle(
     dir: &Path,
     display: &DisplayGeometry,
     l: &[f32],
-    meta: &BundleMeta,
     extra_files: &[(String, Vec<u8>)],
     mask_pixels_per_hole: u32,
 ) -> Result<Manifest, BundleError> {
     check_target_dir(dir)?;
     // Encode before touching the disk: a failure here leaves nothing to clean up.
-    let (manifest, files) = encode_bundle(display, l, meta, extra_files, mask_pixels_per_hole)?;
+    let (manifest, files) = encode_bundle(display, l, extra_files, mask_pixels_per_hole)?;
     let contents: Vec<(String, Vec<u8>, ())> = files.into_iter().map(|(name, bytes)| (name, bytes, ())).collect();
     write_dir_atomically(dir, &contents)?;
     Ok(manifest)
@@ -49,13 +48,12 @@ pub fn write_bundle(
 pub fn encode_bundle(
     display: &DisplayGeometry,
     l: &[f32],
-    meta: &BundleMeta,
     extra_files: &[(String, Vec<u8>)],
     mask_pixels_per_hole: u32,
 ) -> Result<(Manifest, Vec<NamedBytes>), BundleError> {
     check_inputs(display, l, extra_files, mask_pixels_per_hole)?;
     let contents = encode_files(display, l, extra_files, mask_pixels_per_hole)?;
-    let manifest = manifest_for(display, meta, &contents, mask_pixels_per_hole);
+    let manifest = manifest_for(display, &contents, mask_pixels_per_hole);
     let mut manifest_json = serde_json::to_vec_pretty(&manifest).map_err(|e| BundleError::Manifest {
         reason: format!("cannot serialise: {e}"),
     })?;
@@ -165,19 +163,15 @@ fn encode_files(
 }
 
 /// The manifest listing `contents` with their checksums.
-fn manifest_for(display: &DisplayGeometry, meta: &BundleMeta, contents: &[Content], mask_k: u32) -> Manifest {
+fn manifest_for(display: &DisplayGeometry, contents: &[Content], mask_k: u32) -> Manifest {
     let (width, height) = display.frame_size();
     Manifest {
         format_version: FORMAT_VERSION,
-        created_at: chrono::Utc::now().to_rfc3339_opts(chrono::SecondsFormat::Secs, true),
         display: display.clone(),
         frame_width: width,
         frame_height: height,
         n_frames: display.n_bands() as u32,
         barrier_mask_pixels_per_hole: mask_k,
-        profile_label: meta.profile_label.clone(),
-        encoder: meta.encoder.clone(),
-        solver: meta.solver.clone(),
         files: contents
             .iter()
             .map(|(name, bytes, role)| FileEntry {

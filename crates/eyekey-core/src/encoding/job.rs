@@ -43,7 +43,8 @@ pub struct JobOutput {
 
 /// What a finished job produced, in memory: the bundle's manifest, the evaluation report, and every output
 /// file as (path relative to the output directory, bytes): the bundle's files (`frame_<n>.png`,
-/// `barrier_mask.png`, `manifest.json`) and the operator-only `report.json` and `views/<name>.png`.
+/// `barrier_mask.png`, `manifest.json`) and the operator-only `encoding.json`, `report.json` and
+/// `views/<name>.png`.
 #[derive(Clone, Debug)]
 pub struct RenderedJob {
     /// The bundle's manifest, as in `manifest.json`.
@@ -54,7 +55,24 @@ pub struct RenderedJob {
     pub files: Vec<(String, Vec<u8>)>,
 }
 
-/// What the solver did over all rounds of an encode; recorded in the manifest's `solver`.
+/// Name of the operator's record of an encode ([`EncodingRecord`]), written beside the bundle, never in it.
+pub const ENCODING_FILE: &str = "encoding.json";
+
+/// How an encode was made, for the operator who must audit or reproduce it: `encoding.json` beside the bundle
+/// (sealed in the service, served at `/v1/jobs/{id}/encoding`). A display never receives it: it holds the seed,
+/// and the seed is what makes the decoys' noise unknown to everybody else.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EncodingRecord {
+    /// Identifier of the target's profile and version (never the profile itself).
+    pub target_label: String,
+    /// The encoder's options as run: defaults filled in and `seed` set to the one the encode drew from, so that
+    /// encoding the same inputs with these options gives the same frames. Without the document's text.
+    pub options: EncodeOptions,
+    /// What the solver did.
+    pub solver: SolverSummary,
+}
+
+/// What the solver did over all rounds of an encode; recorded in the operator's [`EncodingRecord`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SolverSummary {
     /// The algorithm, in words.

@@ -98,8 +98,14 @@ pub struct EncodeOptions {
     /// ink-box patterns alone, as without a text hint, while the guard and the bystander rounds still judge by the
     /// known-font attacker).
     pub leak_glyphs: bool,
-    /// Seed for population sampling, jitter and noise decoys.
-    pub seed: u64,
+    /// The seed of every random choice of the encode: the population decoys, their noise masks, the draws, the
+    /// kernels' sub-rays and the checks' people. Absent (the default), a seed is drawn for this encode from the
+    /// operating system's CSPRNG ([`EncodeOptions::with_fresh_seed`]), so no two jobs share their decoys' noise
+    /// and nobody can learn it from other jobs' frames (docs/design.md §5, "Fresh randomness"). Give one only to
+    /// reproduce a job or for experiments: a seed anybody knows is a fixed pattern an attacker can learn and
+    /// subtract. The service draws it when the job is created and keeps it sealed with the job; a display client
+    /// never receives it.
+    pub seed: Option<u64>,
     /// Sub-rays traced per light-field sample (S).
     #[cfg_attr(feature = "openapi", schema(minimum = 1, maximum = 256))]
     pub sub_rays: u32,
@@ -243,7 +249,7 @@ impl Default for EncodeOptions {
             decoy_weight: None,
             leak_weight: 3.0,
             leak_glyphs: true,
-            seed: 1,
+            seed: None,
             sub_rays: 16,
             max_iterations: 300,
             tolerance: 1e-5,
@@ -272,6 +278,12 @@ impl Default for EncodeOptions {
             document_text: None,
         }
     }
+}
+
+/// A seed from the operating system's CSPRNG (`getrandom`), for an encode that was given none.
+pub fn fresh_seed() -> u64 {
+    use rand::RngCore;
+    rand::rngs::OsRng.next_u64()
 }
 
 /// The decoys' weight on the `secure` design when none is asked for: over 52 held-out targets and PIN slips,
@@ -345,6 +357,25 @@ impl EncodeOptions {
     /// The decoys' weight on `display`: the one asked for, else the display's default.
     pub fn decoy_weight_on(&self, display: &DisplayGeometry) -> f64 {
         self.decoy_weight.unwrap_or_else(|| Self::default_decoy_weight(display))
+    }
+
+    /// These options with `seed` set: the one given, else a fresh one from the operating system's CSPRNG.
+    pub fn with_fresh_seed(mut self) -> Self {
+        if self.seed.is_none() {
+            self.seed = Some(fresh_seed());
+        }
+        self
+    }
+
+    /// The seed of an encode whose options have been through [`EncodeOptions::with_fresh_seed`] (the pipeline
+    /// does so on entry).
+    ///
+    /// # Panics
+    /// If `seed` is absent: every path into the encoder resolves it first, and drawing one here would give each
+    /// caller a different seed.
+    pub fn drawn_seed(&self) -> u64 {
+        self.seed
+            .expect("the encoder resolves the seed (EncodeOptions::with_fresh_seed) before it draws anything")
     }
 
     /// These options with every display-dependent default filled in for `display`, as a job states them.

@@ -30,12 +30,33 @@ pub struct Encoded {
     pub solver: SolverSummary,
     /// The job's document text hint resolved against its document, for the evaluation.
     pub document_text: Option<crate::evaluation::DocumentText>,
+    /// The seed the encode drew everything from: the options' own, or the fresh one drawn for it
+    /// ([`EncodeOptions::seed`]). An operator's secret, never part of the bundle.
+    pub seed: u64,
 }
 
 /// Encodes a job's document into a light field (no files written). Transport operators come from `cache`. With
 /// `draws` > 1, each draw is encoded in turn and the one the encoder's own checks rank first is kept
-/// ([`EncodeOptions::draws`]).
+/// ([`EncodeOptions::draws`]). Without a seed in the options, one is drawn from the operating system's CSPRNG for
+/// this encode ([`EncodeOptions::with_fresh_seed`]) and returned in [`Encoded::seed`].
 pub fn encode(
+    spec: &JobSpec,
+    cache: &TransportCache,
+    progress: &(dyn Fn(f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<Encoded, PipelineError> {
+    if spec.options.seed.is_none() {
+        let seeded = JobSpec {
+            options: spec.options.clone().with_fresh_seed(),
+            ..spec.clone()
+        };
+        return encode_seeded(&seeded, cache, progress, cancel);
+    }
+    encode_seeded(spec, cache, progress, cancel)
+}
+
+/// [`encode`] once the options hold a seed.
+fn encode_seeded(
     spec: &JobSpec,
     cache: &TransportCache,
     progress: &(dyn Fn(f64) + Sync),
@@ -51,7 +72,7 @@ pub fn encode(
     let mut checks: Vec<DrawCheck> = Vec::new();
     for k in 0..n {
         let mut draw = spec.clone();
-        draw.options.seed = spec.options.seed.wrapping_add(u64::from(k) * DRAW_SEED_STEP);
+        draw.options.seed = Some(spec.options.drawn_seed().wrapping_add(u64::from(k) * DRAW_SEED_STEP));
         draw.options.draws = 1;
         let part = |p: f64| progress((f64::from(k) + p) / f64::from(n));
         let encoded = encode_draw(&draw, cache, &part, cancel)?;
@@ -72,6 +93,8 @@ pub fn encode(
     let (at, mut kept) = best.expect("at least two draws");
     checks[at].kept = true;
     kept.solver.draws = checks;
+    // The job's seed, from which every draw's seed follows (the kept draw's is in `solver.draws`).
+    kept.seed = spec.options.drawn_seed();
     Ok(kept)
 }
 
@@ -142,13 +165,13 @@ fn confirm_draw(
 ) -> Result<(u32, u32), PipelineError> {
     let (o, d) = (&spec.options, &spec.display);
     let topts = TransportOptions {
-        seed: draw.seed ^ DRAW_CONFIRM_SEED,
+        seed: draw.drawn_seed() ^ DRAW_CONFIRM_SEED,
         ..base_transport(o)
     };
     let reference = check_reference(spec, text, RetinalGrid::for_display(d, topts.retina_oversample))?;
     let people = sample_population(
         DRAW_CONFIRM_PEOPLE as usize,
-        draw.seed.wrapping_add(DRAW_CONFIRM_PEOPLE_SEED),
+        draw.drawn_seed().wrapping_add(DRAW_CONFIRM_PEOPLE_SEED),
         Default::default(),
     );
     let read = readers_at_seat(
@@ -227,7 +250,7 @@ fn check_draw(
 ) -> Result<DrawCheck, PipelineError> {
     let (o, d, l) = (&spec.options, &spec.display, &encoded.light_field);
     let topts = TransportOptions {
-        seed: o.seed ^ DRAW_CHECK_SEED,
+        seed: o.drawn_seed() ^ DRAW_CHECK_SEED,
         ..base_transport(o)
     };
     let look = |eye: EyePosition| {
@@ -255,7 +278,7 @@ fn check_draw(
         .sum();
     let mut people = sample_population(
         (DRAW_CHECK_PEOPLE / 2) as usize,
-        o.seed.wrapping_add(9_000),
+        o.drawn_seed().wrapping_add(9_000),
         Default::default(),
     );
     if o.near_pupil_decoys > 0 {
@@ -264,13 +287,13 @@ fn check_draw(
             people.extend(near_pupil_decoys(
                 spec.target.pupil_diameter_mm,
                 10,
-                o.seed.wrapping_add(9_500 + batch),
+                o.drawn_seed().wrapping_add(9_500 + batch),
             )?);
         }
     } else {
         people.extend(sample_population(
             (DRAW_CHECK_PEOPLE / 2) as usize,
-            o.seed.wrapping_add(9_500),
+            o.drawn_seed().wrapping_add(9_500),
             Default::default(),
         ));
     }
@@ -286,7 +309,7 @@ fn check_draw(
     )?
     .looks;
     Ok(DrawCheck {
-        seed: draw.seed,
+        seed: draw.drawn_seed(),
         target_reads: reads(&target, l),
         ring_read,
         ring_positions: ring.len() as u32,
@@ -495,6 +518,7 @@ fn encode_draw(
         light_field: l,
         solver: summary,
         document_text,
+        seed: o.drawn_seed(),
     })
 }
 
@@ -586,7 +610,7 @@ fn document_text(
 fn base_transport(o: &EncodeOptions) -> TransportOptions {
     TransportOptions {
         sub_rays: o.sub_rays,
-        seed: o.seed,
+        seed: o.drawn_seed(),
         retina_oversample: 1,
         derivative_terms: vec![],
         ..Default::default()
@@ -596,7 +620,7 @@ fn base_transport(o: &EncodeOptions) -> TransportOptions {
 /// Transport options of the target guard's second look at the target (`GUARD_SEED`, `GUARD_SUB_RAYS`).
 pub fn guard_transport(o: &EncodeOptions) -> TransportOptions {
     TransportOptions {
-        seed: o.seed ^ GUARD_SEED,
+        seed: o.drawn_seed() ^ GUARD_SEED,
         sub_rays: (GUARD_SUB_RAYS * o.sub_rays).min(1024),
         ..base_transport(o)
     }
@@ -803,17 +827,11 @@ impl Cast {
     ) -> Result<(), PipelineError> {
         let o = &spec.options;
         let mut people = spec.observers.clone();
-        let mut sampled = sample_population(o.population_decoys as usize, o.seed.wrapping_add(1), Default::default());
-        if o.decoys_at_target_pupil {
-            for p in &mut sampled {
-                *p = at_pupil(p, spec.target.pupil_diameter_mm)?;
-            }
-        }
-        people.extend(sampled);
+        people.extend(population_decoys(spec)?);
         let near = near_pupil_decoys(
             spec.target.pupil_diameter_mm,
             o.near_pupil_decoys,
-            o.seed.wrapping_add(2),
+            o.drawn_seed().wrapping_add(2),
         )?;
         // Everybody at the target's position, then the near-pupil decoys again beside it (`near_pupil_ring_mm`).
         let mut looks: Vec<(VisionProfile, EyePosition)> = people
@@ -913,7 +931,7 @@ impl Cast {
     ) -> Result<HeadRound, PipelineError> {
         let (o, d) = (&spec.options, &spec.display);
         let topts = TransportOptions {
-            seed: o.seed ^ HEAD_CHECK_SEED,
+            seed: o.drawn_seed() ^ HEAD_CHECK_SEED,
             ..base_transport(o)
         };
         let looks = tracked_ring();
@@ -1136,7 +1154,7 @@ fn nearness_to_reading(score: &crate::evaluation::ViewScore, reference: &Referen
 /// (docs/experiments.md §2e).
 fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>, PipelineError> {
     let o = &spec.options;
-    let seed = o.seed.wrapping_add(7_000 + 1_000 * round as u64);
+    let seed = o.drawn_seed().wrapping_add(7_000 + 1_000 * round as u64);
     let near = if o.near_pupil_decoys > 0 {
         o.adaptive_candidates / 2
     } else {
@@ -1151,8 +1169,23 @@ fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>,
     Ok(candidates)
 }
 
-/// `person` looking through a pupil no larger than `pupil_mm`: a larger pupil is stopped down to it, the
-/// wavefront rescaled (ANSI Z80.28 Annex B, `ZernikeCoefficients::rescaled`).
+/// The decoys a job samples from the population (`population_decoys` of them, from the job's seed; at the target's
+/// pupil with `decoys_at_target_pupil`).
+fn population_decoys(spec: &JobSpec) -> Result<Vec<VisionProfile>, PipelineError> {
+    let o = &spec.options;
+    let mut sampled = sample_population(
+        o.population_decoys as usize,
+        o.drawn_seed().wrapping_add(1),
+        Default::default(),
+    );
+    if o.decoys_at_target_pupil {
+        for p in &mut sampled {
+            *p = at_pupil(p, spec.target.pupil_diameter_mm)?;
+        }
+    }
+    Ok(sampled)
+}
+
 /// `n` decoys whose pupils bracket the target's `pupil_mm`, evenly from 0.3 mm narrower to 0.7 mm wider (one:
 /// 0.2 mm wider): for each, the first of a sampled pool whose pupil is at least that wide (else the widest),
 /// given that pupil by [`at_pupil`].
@@ -1180,6 +1213,8 @@ pub fn near_pupil_decoys(pupil_mm: f64, n: u32, seed: u64) -> Result<Vec<VisionP
         .collect()
 }
 
+/// `person` looking through a pupil no larger than `pupil_mm`: a larger pupil is stopped down to it, the
+/// wavefront rescaled (ANSI Z80.28 Annex B, `ZernikeCoefficients::rescaled`).
 fn at_pupil(person: &VisionProfile, pupil_mm: f64) -> Result<VisionProfile, PipelineError> {
     if person.pupil_diameter_mm <= pupil_mm {
         return Ok(person.clone());
@@ -1267,7 +1302,7 @@ fn decoy_image(spec: &JobSpec, g: RetinalGrid, k: usize) -> image::RgbImage {
     match (o.decoy, &spec.decoy) {
         (DecoyKind::Grey, _) => image::RgbImage::from_pixel(g.width, g.height, image::Rgb([188, 188, 188])),
         (DecoyKind::Image, Some(img)) => img.clone(),
-        _ => noise_decoy(g.width, g.height, 2, o.seed.wrapping_add(100 + k as u64)),
+        _ => noise_decoy(g.width, g.height, 2, o.drawn_seed().wrapping_add(100 + k as u64)),
     }
 }
 
@@ -1409,7 +1444,8 @@ impl Objective for DummyDim {
     }
 }
 
-/// Runs one job and writes its bundle (frames, barrier mask, manifest) and evaluation into `out_dir`.
+/// Runs one job and writes its bundle (frames, barrier mask, manifest), the operator's record of the encode
+/// (`encoding.json`) and the evaluation into `out_dir`.
 pub fn run_job(
     spec: &JobSpec,
     out_dir: &Path,
@@ -1433,7 +1469,7 @@ pub fn render_job(
 }
 
 /// Evaluates an encoded light field (when `with_evaluation`), then writes its bundle into `out_dir` and the
-/// evaluation beside it (report.json, views/).
+/// operator's record and the evaluation beside it (encoding.json, report.json, views/).
 pub fn write_outputs(
     spec: &JobSpec,
     encoded: &Encoded,
@@ -1457,15 +1493,16 @@ pub fn render_outputs(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<RenderedJob, PipelineError> {
-    let meta = bundle_meta(spec, encoded)?;
+    let record = encoding_record(spec, encoded)?;
     let evaluation = if with_evaluation {
         Some(evaluate_job(spec, encoded, cache, &|p| progress(0.9 * p), cancel)?)
     } else {
         None
     };
-    let (manifest, mut files) = crate::bundle::encode_bundle(&spec.display, &encoded.light_field, &meta, &[], 4)
+    let (manifest, mut files) = crate::bundle::encode_bundle(&spec.display, &encoded.light_field, &[], 4)
         .map_err(|e| PipelineError::internal("encoding the bundle", e))?;
     // Operator-only outputs live beside the bundle and are never listed in its manifest.
+    files.push((ENCODING_FILE.to_string(), record));
     if let Some(evaluation) = &evaluation {
         files.extend(evaluation_files(evaluation).map_err(|e| PipelineError::internal("encoding the evaluation", e))?);
     }
@@ -1503,19 +1540,22 @@ fn write_rendered(rendered: &RenderedJob, out_dir: &Path) -> Result<JobOutput, P
     })
 }
 
-/// What the manifest records about this encode: the encoder's options without the document's text (a
-/// display must learn nothing of the document but its frames).
-fn bundle_meta(spec: &JobSpec, encoded: &Encoded) -> Result<crate::bundle::BundleMeta, PipelineError> {
-    let record = |what: &str, e: serde_json::Error| PipelineError::internal(format!("recording the {what}"), e);
-    let mut encoder = serde_json::to_value(&spec.options).map_err(|e| record("encoder options", e))?;
-    if let Some(options) = encoder.as_object_mut() {
-        options.remove("document_text");
-    }
-    Ok(crate::bundle::BundleMeta {
-        profile_label: spec.target_label.clone(),
-        encoder,
-        solver: serde_json::to_value(&encoded.solver).map_err(|e| record("solver summary", e))?,
-    })
+/// The operator's record of this encode ([`EncodingRecord`]): the options as run, with the seed the encode drew
+/// from and without the document's text, the target's label and the solver's summary.
+fn encoding_record(spec: &JobSpec, encoded: &Encoded) -> Result<Vec<u8>, PipelineError> {
+    let record = EncodingRecord {
+        target_label: spec.target_label.clone(),
+        options: EncodeOptions {
+            seed: Some(encoded.seed),
+            document_text: None,
+            ..spec.options.clone()
+        },
+        solver: encoded.solver.clone(),
+    };
+    let mut bytes =
+        serde_json::to_vec_pretty(&record).map_err(|e| PipelineError::internal("recording the encode", e))?;
+    bytes.push(b'\n');
+    Ok(bytes)
 }
 
 /// The job's own evaluation: its observers, a population of `evaluation_population`, with a seed stream the
@@ -1531,7 +1571,7 @@ fn evaluate_job(
     let eval_opts = EvaluationOptions {
         document_text: encoded.document_text.clone(),
         population: spec.options.evaluation_population,
-        seed: spec.options.seed.wrapping_add(20_000),
+        seed: encoded.seed.wrapping_add(20_000),
         sub_rays: spec.options.sub_rays,
         optics: spec.options.optics,
         ..Default::default()
@@ -1600,7 +1640,7 @@ mod tests {
         let plain = adaptive_candidates(&spec, 1).unwrap();
         assert_eq!(
             plain,
-            sample_population(10, spec.options.seed + 8_000, Default::default())
+            sample_population(10, spec.options.drawn_seed() + 8_000, Default::default())
         );
         spec.options.near_pupil_decoys = 6;
         let mixed = adaptive_candidates(&spec, 1).unwrap();
@@ -1667,6 +1707,7 @@ mod tests {
                 near_pupil_decoys: 0,
                 evaluation_population: 2,
                 document_text: Some(hint),
+                seed: Some(1),
                 ..Default::default()
             },
         }
@@ -1902,6 +1943,100 @@ mod tests {
     }
 
     #[test]
+    fn without_a_seed_every_encode_draws_its_own_and_a_given_seed_reproduces_its_frames() {
+        // Two encodes of the same inputs without a seed: each draws one from the operating system, so their decoys
+        // (people sampled from the population, their noise masks) and their frames differ; the seed each drew,
+        // given back, reproduces its frames bit for bit.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let mut spec = pin_job(pin_hint());
+        spec.options.seed = None;
+        spec.options.population_decoys = 2;
+        spec.options.decoy_weight = Some(0.3);
+        let a = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        let b = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        assert_ne!(a.seed, b.seed);
+        assert_ne!(
+            a.light_field, b.light_field,
+            "two jobs without a seed gave the same frames"
+        );
+        let seeded = |seed: u64| JobSpec {
+            options: EncodeOptions {
+                seed: Some(seed),
+                ..spec.options.clone()
+            },
+            ..spec.clone()
+        };
+        let (sa, sb) = (seeded(a.seed), seeded(b.seed));
+        assert_ne!(population_decoys(&sa).unwrap(), population_decoys(&sb).unwrap());
+        let grid = RetinalGrid::for_display(&spec.display, 1);
+        assert_ne!(decoy_image(&sa, grid, 0), decoy_image(&sb, grid, 0));
+        let again = encode(&sa, &cache, &|_| {}, &cancel).unwrap();
+        assert_eq!(again.seed, a.seed);
+        assert_eq!(again.light_field, a.light_field);
+    }
+
+    #[test]
+    fn the_operators_record_holds_the_seed_and_the_bundle_holds_no_option() {
+        // `encoding.json` (the operator's) has the seed the encode drew, and encoding its options again gives the same
+        // frames; the manifest has only the display's fields, and no file of the bundle names the seed.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let mut spec = pin_job(pin_hint());
+        spec.options.seed = None;
+        spec.options.evaluation_population = 0;
+        let encoded = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        let rendered = render_outputs(&spec, &encoded, false, &cache, &|_| {}, &cancel).unwrap();
+        let file = |name: &str| &rendered.files.iter().find(|(n, _)| n == name).unwrap().1;
+        let record: EncodingRecord = serde_json::from_slice(file(ENCODING_FILE)).unwrap();
+        assert_eq!(record.options.seed, Some(encoded.seed));
+        assert_eq!(
+            record.options.document_text, None,
+            "the record leaves the document's text out"
+        );
+        assert!(!rendered.manifest.files.iter().any(|f| f.name == ENCODING_FILE));
+        let manifest: serde_json::Value = serde_json::from_slice(file(crate::bundle::MANIFEST_FILE)).unwrap();
+        let mut keys: Vec<&str> = manifest.as_object().unwrap().keys().map(String::as_str).collect();
+        keys.sort_unstable();
+        assert_eq!(
+            keys,
+            [
+                "barrier_mask_pixels_per_hole",
+                "display",
+                "files",
+                "format_version",
+                "frame_height",
+                "frame_width",
+                "n_frames"
+            ]
+        );
+        let seed_text = encoded.seed.to_string();
+        for entry in &rendered.manifest.files {
+            let bytes = file(&entry.name);
+            assert!(
+                !bytes.windows(seed_text.len()).any(|w| w == seed_text.as_bytes()),
+                "{} holds the seed",
+                entry.name
+            );
+        }
+        let manifest_text = String::from_utf8(file(crate::bundle::MANIFEST_FILE).clone()).unwrap();
+        for word in ["seed", "options", "encoder", "solver", "profile", "label"] {
+            assert!(
+                !manifest_text.to_lowercase().contains(word),
+                "the manifest says {word}: {manifest_text}"
+            );
+        }
+        let again = JobSpec {
+            options: record.options.clone(),
+            ..spec.clone()
+        };
+        assert_eq!(
+            encode(&again, &cache, &|_| {}, &cancel).unwrap().light_field,
+            encoded.light_field
+        );
+    }
+
+    #[test]
     fn of_several_draws_the_one_the_checks_rank_first_is_kept_whole() {
         // Three draws of a job with decoys and a head ring: each is checked, one is kept, and the light field
         // returned is that draw's own encode, bit for bit.
@@ -1946,7 +2081,7 @@ mod tests {
         }
         let mut alone = spec.clone();
         alone.options.draws = 1;
-        alone.options.seed = kept[0].seed;
+        alone.options.seed = Some(kept[0].seed);
         let again = encode(&alone, &cache, &|_| {}, &cancel).unwrap();
         assert_eq!(again.light_field, encoded.light_field);
         assert!(again.solver.draws.is_empty());
@@ -2017,7 +2152,7 @@ mod tests {
         let plain = plain_light_field_for_image(&spec.display, &spec.document);
         let confirm = |seed: u64, l: &[f32]| {
             let draw = EncodeOptions {
-                seed,
+                seed: Some(seed),
                 ..spec.options.clone()
             };
             confirm_draw(&spec, &draw, l, text.as_ref(), &cache, &cancel).unwrap()
