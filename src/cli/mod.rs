@@ -309,6 +309,34 @@ pub struct BenchArgs {
     pub decoy_weight: Option<f64>,
 }
 
+/// The text hint of `eyekey encode` and `eyekey evaluate`.
+#[derive(Args, Debug)]
+pub struct TextHintArgs {
+    /// The document's text as drawn by `eyekey example document` (repeat per line; write secret characters
+    /// as `*` to have them read from the document): the known-font attacker then judges every view, the
+    /// target's included (without it, the target must reach the legibility at which a reader almost surely
+    /// reads, docs/legibility-calibration.md).
+    #[arg(long)]
+    pub text: Vec<String>,
+    /// Pixels per font dot of --text, as drawn (`eyekey example document --scale`).
+    #[arg(long, default_value_t = 4)]
+    pub text_scale: u32,
+    /// The secret characters' alphabet of --text.
+    #[arg(long, default_value = "0123456789")]
+    pub alphabet: String,
+}
+
+impl TextHintArgs {
+    /// The hint as given (None without --text); the encoder and the evaluation check it against the document.
+    pub fn hint(&self) -> Option<eyekey_core::evaluation::DocumentText> {
+        (!self.text.is_empty()).then(|| eyekey_core::evaluation::DocumentText {
+            lines: self.text.clone(),
+            scale: self.text_scale,
+            alphabet: self.alphabet.clone(),
+        })
+    }
+}
+
 /// Options of `eyekey encode`.
 #[derive(Args, Debug)]
 pub struct EncodeArgs {
@@ -358,6 +386,9 @@ pub struct EncodeArgs {
     /// The document (PNG or JPEG).
     #[arg(long)]
     pub document: PathBuf,
+    /// The document's text, font scale and secret alphabet, where it was drawn by eyekey.
+    #[command(flatten)]
+    pub hint: TextHintArgs,
     /// Encoder.
     #[arg(long, value_enum, default_value = "multiplex")]
     pub method: Method,
@@ -431,16 +462,9 @@ pub struct EvaluateArgs {
     /// Forward model of every simulated view: wave or geometric.
     #[arg(long, value_enum, default_value = "wave")]
     pub optics: Optics,
-    /// The document's text as drawn by `eyekey example document` (repeat per line; write secret characters
-    /// as `*` to have them read from the document): every view is then also read by the known-font attacker.
-    #[arg(long)]
-    pub text: Vec<String>,
-    /// Pixels per font dot of --text, as drawn.
-    #[arg(long, default_value_t = 4)]
-    pub text_scale: u32,
-    /// The secret characters' alphabet of --text.
-    #[arg(long, default_value = "0123456789")]
-    pub alphabet: String,
+    /// The document's text, font scale and secret alphabet, where it was drawn by eyekey.
+    #[command(flatten)]
+    pub hint: TextHintArgs,
     /// Output directory (report.json, views/).
     #[arg(long)]
     pub out: PathBuf,
@@ -894,6 +918,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         adaptive_rounds: a.adaptive_rounds.unwrap_or(d.adaptive_rounds),
         camera_decoys: a.camera_decoys || d.camera_decoys,
         camera_decoy_ring_mm: a.camera_decoy_ring.unwrap_or(d.camera_decoy_ring_mm),
+        document_text: a.hint.hint(),
         ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {
@@ -916,6 +941,9 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         eyekey_core::encoding::pipeline::encode(&spec, &cache, &|p| bar.set_position((p * 1000.0) as u64), &cancel)?;
     eyekey_core::encoding::pipeline::write_outputs(&spec, &encoded, &a.out, false, &cache, &|_| {}, &cancel)?;
     bar.finish_and_clear();
+    if let Some(reading) = &encoded.solver.target_reading {
+        eprintln!("target {}", reading.describe());
+    }
     eprintln!(
         "wrote {} in {:.1} s (solver: {} iterations, {}; {} seed in {}, never in the bundle)",
         a.out.display(),
@@ -944,15 +972,9 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     if a.population > 2000 {
         bail!("--population must be at most 2000, got {}", a.population);
     }
-    let document_text = if a.text.is_empty() {
-        None
-    } else {
-        let hint = eyekey_core::evaluation::DocumentText {
-            lines: a.text.clone(),
-            scale: a.text_scale,
-            alphabet: a.alphabet.clone(),
-        };
-        Some(hint.resolve(&document).context("--text")?)
+    let document_text = match a.hint.hint() {
+        Some(hint) => Some(hint.resolve(&document).context("--text")?),
+        None => None,
     };
     let options = EvaluationOptions {
         population: a.population,
@@ -980,8 +1002,11 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     eyekey_core::encoding::pipeline::write_evaluation(&ev, &a.out)?;
     let r = &ev.report;
     println!(
-        "target: legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}",
-        r.target.legibility, r.target.psnr_db, r.target.ssim
+        "target: {}; legibility {:.2}, PSNR {:.1} dB, SSIM {:.2}",
+        r.target_reading.describe(),
+        r.target.legibility,
+        r.target.psnr_db,
+        r.target.ssim
     );
     for o in &r.observers {
         println!(

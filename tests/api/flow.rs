@@ -174,7 +174,11 @@ pub async fn whole_flow(app: &TestApp) {
         (score.psnr_db - reported["psnr_db"].as_f64().unwrap()).abs() < 0.05,
         "{score:?} vs {reported}"
     );
-    assert_eq!(score.readable, reported["readable"].as_bool().unwrap());
+    // The report holds the target to the target's bar.
+    let reading = reference.target_reading(&score, 0.0);
+    assert_eq!(reading.reads, reported["readable"].as_bool().unwrap());
+    assert_eq!(reading.reads, report["target_reading"]["reads"].as_bool().unwrap());
+    assert_eq!(report["target_reading"]["judge"], "legibility");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

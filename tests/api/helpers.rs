@@ -329,6 +329,10 @@ pub fn job_body(f: &Fixtures) -> Value {
     })
 }
 
+/// Options that make the solve fast: five iterations on a display too small to resolve its views, whose target
+/// cannot read the result, delivered anyway (`ensure_target_reads: false`, the operator's explicit acceptance),
+/// for the tests of everything around the encoder. `jobs::a_job_whose_target_cannot_read_its_frames_fails_*`
+/// holds the same job with the guard on.
 pub fn fast_options() -> Value {
     json!({
         "max_iterations": 5,
@@ -336,6 +340,7 @@ pub fn fast_options() -> Value {
         "population_decoys": 1,
         "near_pupil_decoys": 0,
         "evaluation_population": 2,
+        "ensure_target_reads": false,
     })
 }
 

@@ -393,3 +393,47 @@ async fn a_job_for_a_display_that_does_not_resolve_its_views_is_accepted_with_a_
     let list = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;
     assert_eq!(list["items"][0]["warnings"], job["warnings"]);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_whose_target_cannot_read_its_frames_fails_with_target_cannot_read_and_delivers_nothing() {
+    // A checkerboard at the finest pitch the display's retinal grid holds, on a display that does not resolve its
+    // views (M = 0.30), seen by the fixtures' myope: nothing the encoder can do shows it to the target, with the
+    // decoys at any weight. The job fails, once, naming the judge, how far it was and what would help; no frames
+    // reach the display.
+    let app = crate::helpers::spawn_app_with(|c| c.workers = 1).await;
+    let mut f = app.fixtures().await;
+    let checker = image::RgbImage::from_fn(24, 24, |x, y| {
+        if (x / 2 + y / 2) % 2 == 0 {
+            image::Rgb([20, 20, 20])
+        } else {
+            image::Rgb([235, 235, 235])
+        }
+    });
+    let mut png = Vec::new();
+    checker
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    f.document_id = app.upload(png).await;
+    let mut body = job_body(&f);
+    body["options"]["ensure_target_reads"] = json!(true);
+    body["options"]["seed"] = json!(3);
+    let created = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+    let id = created["id"].as_str().unwrap();
+    let job = app.wait_for_terminal(id, Duration::from_secs(120)).await;
+    assert_eq!(job["state"], "failed", "{job}");
+    assert_eq!(job["attempts"], 1, "a target that cannot read is not retried: {job}");
+    assert_eq!(job["error_code"], "target_cannot_read", "{job}");
+    let error = job["last_error"].as_str().unwrap();
+    assert!(
+        error.starts_with(
+            "target_cannot_read: the target does not read its view of the frames (no text hint: legibility"
+        ) && error.contains("read from 0.70")
+            && error.contains("what would help"),
+        "{error}"
+    );
+    assert!(job["bundle_files"].is_null(), "{job}");
+    let r = app
+        .display_get(&f.display_token, &format!("/v1/frames/jobs/{id}/bundle.zip"))
+        .await;
+    assert_ne!(r.status(), StatusCode::OK);
+}

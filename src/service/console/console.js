@@ -826,10 +826,14 @@ async function jobPage(id) {
         h("dt", {}, "Observers"), h("dd", {}, j.observers.length ? j.observers.map((o) => who(o.profile_id, o.version)).join("; ") : "none"),
         h("dt", {}, "Display"), h("dd", { class: "mono" }, j.display_id),
         h("dt", {}, "Document"), h("dd", { class: "mono" }, j.document_id),
+        h("dt", {}, "Target judged by"), h("dd", { id: "job-judge" }, j.options && j.options.document_text
+          ? "the known-font attacker (the document's text is known): every secret character read right"
+          : "legibility (no text hint): the target must reach the level at which a reader almost surely reads"),
         h("dt", {}, "Created"), h("dd", {}, fmtTime(j.timings.created_at)),
         h("dt", {}, "Finished"), h("dd", {}, fmtTime(j.timings.finished_at)),
         j.timings.solve_seconds ? [h("dt", {}, "Solve"), h("dd", {}, `${fmt(j.timings.solve_seconds, 1)} s`)] : null,
-        j.last_error ? [h("dt", {}, "Last error"), h("dd", { class: "error" }, j.last_error)] : null),
+        j.last_error ? [h("dt", {}, j.error_code === "target_cannot_read" ? "Failed: the target cannot read" : "Last error"),
+          h("dd", { class: "error", id: "job-error" }, j.last_error)] : null),
       !TERMINAL.includes(j.state) && has("submit") ? h("div", { class: "actions" }, cancelButton(j, async () => {})) : null,
     ]);
   }
@@ -885,6 +889,13 @@ function verdict(readable, isTarget) {
     : h("span", { class: "verdict-good" }, "cannot read it");
 }
 
+/** Which judge decided whether the target reads, and by how much. */
+function targetJudge(r) {
+  return r.judge === "known_font"
+    ? `judged by the known-font attacker: margin ${fmt(r.score, 3)} (asked ${fmt(r.bar, 3)})`
+    : `no text hint: judged by legibility, read from ${fmt(r.bar)}`;
+}
+
 function knownFont(score) {
   const k = score && score.known_font;
   if (!k) return "—";
@@ -914,7 +925,9 @@ async function showEvaluation(job, results, labels) {
     figures.push(h("figure", { "data-view": name },
       authImage(`/v1/jobs/${id}/views/${name}`, title),
       h("figcaption", {}, h("strong", {}, title), h("br"),
-        score ? [`legibility ${fmt(score.legibility)} · `, verdict(score.readable, isTarget), h("br"), `known-font read: ${knownFont(score)}`] : "what the document should look like")));
+        score ? [`legibility ${fmt(score.legibility)} · `, verdict(score.readable, isTarget), h("br"),
+          isTarget && report.target_reading ? targetJudge(report.target_reading) : `known-font read: ${knownFont(score)}`]
+          : "what the document should look like")));
   };
   figure("objective.png", "The objective (the document)", null);
   figure("target.png", `The target (${report.target.label})`, report.target, true);

@@ -356,7 +356,11 @@ impl Outcome {
             (Ok(Ok(solved)), _) => Self::Succeeded(solved),
             (Ok(Err(_)) | Err(_), Stop::Shutdown) => Self::Interrupted,
             (Ok(Err(_)), Stop::Cancel) | (Ok(Err(PipelineError::Cancelled)), _) => Self::Cancelled,
-            (Ok(Err(e @ PipelineError::Invalid { .. })), _) => Self::Invalid(e),
+            // Neither a bad input nor a target that cannot read its frames changes on a retry (the job's seed is
+            // fixed).
+            (Ok(Err(e @ (PipelineError::Invalid { .. } | PipelineError::TargetCannotRead { .. }))), _) => {
+                Self::Invalid(e)
+            }
             (Ok(Err(e)), _) => Self::Errored(e),
             (Err(join_error), _) => Self::Panicked(join_error),
         }

@@ -113,6 +113,10 @@ pub struct JobView {
     pub options: EncodeOptions,
     /// Last error (of the final attempt when failed, else of an earlier retried attempt).
     pub last_error: Option<String>,
+    /// The failure's code, where it has one: `target_cannot_read` when the target does not read its frames even
+    /// with the decoys as light as the target guard takes them (`last_error` says how far it was and what would
+    /// help). No frames are delivered then.
+    pub error_code: Option<String>,
     /// Headline numbers of the evaluation report once succeeded: target, observers, and each section's
     /// scalars and best case (the full report: `/v1/jobs/{id}/evaluation`).
     #[schema(value_type = Option<Object>)]
@@ -178,6 +182,13 @@ impl JobView {
             method: options.method,
             options,
             last_error: r.last_error.clone(),
+            error_code: r
+                .last_error
+                .as_deref()
+                .and_then(|e| e.split_once(':'))
+                .map(|(code, _)| code)
+                .filter(|code| *code == eyekey_core::encoding::pipeline::TARGET_CANNOT_READ)
+                .map(str::to_string),
             evaluation_summary: sealed::job_summary(master, r).map_err(|e| e.context("stored summary"))?,
             bundle_files: r.bundle_files.as_deref().and_then(|s| serde_json::from_str(s).ok()),
             timings: JobTimings {

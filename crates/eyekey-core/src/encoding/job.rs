@@ -108,8 +108,14 @@ pub struct SolverSummary {
     pub decoy_weight_scale: f64,
     /// Whether the target reads its own view of the final light field, by the evaluation's judge (the known-font
     /// attacker with a text hint, the legibility threshold without), through the encoder's own operator and
-    /// through one whose kernels are drawn with another seed.
+    /// through one whose kernels are drawn with another seed, by the target's bar (every secret character read
+    /// with the margin asked where the text is known; else legibility at least
+    /// [`READS_THRESHOLD`](crate::evaluation::READS_THRESHOLD)).
     pub target_reads: bool,
+    /// The final light field's reading by the target, through whichever of the two looks is further from reading:
+    /// the judge, its score and the bar.
+    #[serde(default)]
+    pub target_reading: Option<crate::evaluation::TargetReading>,
     /// Every draw tried and what the encoder's own checks saw of it (`draws` > 1; empty otherwise). The rest of the
     /// summary (iterations, time, solves) is the kept draw's.
     #[serde(default)]
@@ -222,6 +228,21 @@ pub enum PipelineError {
         /// What is wrong with it.
         reason: String,
     },
+    /// The target does not read its frames, even with the decoys as light as the target guard takes them
+    /// (`ensure_target_reads`): the job must not deliver frames its key holder cannot read.
+    #[error(
+        "{TARGET_CANNOT_READ}: the target does not read its view of the frames ({}), even with the decoys at \
+         {decoy_weight_scale} of their weight; what would help: fewer or lighter decoys (population_decoys, \
+         near_pupil_decoys, decoy_weight), a larger text scale, a display that resolves more views, or, where the \
+         document is a rendered text, its text hint (document_text)",
+        reading.evidence()
+    )]
+    TargetCannotRead {
+        /// The final light field's reading by the target: judge, score and bar.
+        reading: crate::evaluation::TargetReading,
+        /// The factor the decoys' weights were scaled by at the end.
+        decoy_weight_scale: f64,
+    },
     /// The cancel flag was raised.
     #[error("cancelled")]
     Cancelled,
@@ -253,6 +274,9 @@ impl PipelineError {
         }
     }
 }
+
+/// The code a job that fails because its target does not read ends with ([`PipelineError::TargetCannotRead`]).
+pub const TARGET_CANNOT_READ: &str = "target_cannot_read";
 
 /// Fraction of the display white the target is asked to see for document white: the rest is headroom the
 /// encoder uses to show decoys to everybody else.

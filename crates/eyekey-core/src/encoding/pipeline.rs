@@ -45,14 +45,25 @@ pub fn encode(
     progress: &(dyn Fn(f64) + Sync),
     cancel: &AtomicBool,
 ) -> Result<Encoded, PipelineError> {
-    if spec.options.seed.is_none() {
+    let encoded = if spec.options.seed.is_none() {
         let seeded = JobSpec {
             options: spec.options.clone().with_fresh_seed(),
             ..spec.clone()
         };
-        return encode_seeded(&seeded, cache, progress, cancel);
+        encode_seeded(&seeded, cache, progress, cancel)?
+    } else {
+        encode_seeded(spec, cache, progress, cancel)?
+    };
+    // Frames the target cannot read are not a result: the job fails, saying how far it was and what would help.
+    match encoded.solver.target_reading {
+        Some(reading) if spec.options.ensure_target_reads && !encoded.solver.target_reads => {
+            Err(PipelineError::TargetCannotRead {
+                reading,
+                decoy_weight_scale: encoded.solver.decoy_weight_scale,
+            })
+        }
+        _ => Ok(encoded),
     }
-    encode_seeded(spec, cache, progress, cancel)
 }
 
 /// [`encode`] once the options hold a seed.
@@ -261,7 +272,10 @@ fn check_draw(
     };
     let target = look(EyePosition::default())?;
     let reference = check_reference(spec, encoded.document_text.as_ref(), target.grid())?;
-    let reads = |o: &Observer, l: &[f32]| reference.score_observer("check", o, l).0.readable;
+    let reads = |o: &Observer, l: &[f32]| {
+        let score = reference.score_observer("check", o, l).0;
+        reference.target_reading(&score, spec.options.target_margin).reads
+    };
     let ring: Vec<EyePosition> = if o.head_radius_mm > 0.0 || o.head_rounds > 0 {
         tracked_ring()
     } else {
@@ -407,6 +421,7 @@ fn encode_draw(
         unknowns: 0,
         decoy_weight_scale: 1.0,
         target_reads: false,
+        target_reading: None,
         solves: Vec::new(),
     };
     for round in 0..=rounds {
@@ -512,6 +527,7 @@ fn encode_draw(
         }
     }
     progress(0.85);
+    summary.target_reading = Some(cast.worse_target_reading(&reference, &l, o.target_margin));
     summary.observers = cast.others.len() + 1 + cast.moved.len();
     summary.unknowns = l.len();
     Ok(Encoded {
@@ -750,11 +766,26 @@ impl Cast {
         readable && worst.is_none_or(|w| w >= margin)
     }
 
+    /// The target's reading of `l` through its own operator and the check's, whichever is further from reading
+    /// (the lower score past the bar).
+    fn worse_target_reading(&self, reference: &Reference, l: &[f32], margin: f64) -> crate::evaluation::TargetReading {
+        let [own, check] = [&self.target, &self.check]
+            .map(|o| reference.target_reading(&reference.score_observer("target", o, l).0, margin));
+        match (own.reads, check.reads) {
+            (true, false) => check,
+            (false, true) => own,
+            _ if check.margin() < own.margin() => check,
+            _ => own,
+        }
+    }
+
     /// How the target reads `l` by `reference` through its own operator and the check's: whether both looks
     /// read it, and the smaller of their known-font margins (None where the text is not known).
     fn target_reading(&self, reference: &Reference, l: &[f32]) -> (bool, Option<f64>) {
         let scores = [&self.target, &self.check].map(|o| reference.score_observer("target", o, l).0);
-        let readable = scores.iter().all(|s| s.readable);
+        // The target's bar (every secret character right, or the reads threshold without a text hint), not the
+        // "might read" one everybody else is held under.
+        let readable = scores.iter().all(|s| reference.target_reading(s, 0.0).reads);
         let margins: Option<Vec<f64>> = scores.iter().map(|s| s.known_font.as_ref().map(|k| k.margin)).collect();
         (readable, margins.map(|m| m.into_iter().fold(f64::INFINITY, f64::min)))
     }
@@ -935,7 +966,7 @@ impl Cast {
             ..base_transport(o)
         };
         let looks = tracked_ring();
-        // Each position's lead: the known-font margin where the text is known (the legibility over the threshold
+        // Each position's lead: the known-font margin where the text is known (the legibility over the reads threshold
         // otherwise), and whether the target reads there.
         let seen: Vec<(f64, bool)> = looks
             .par_iter()
@@ -948,11 +979,12 @@ impl Cast {
                 let score = reference
                     .score_observer("target", &moved, &crate::physics::tracking::retarget(d, l_now, eye))
                     .0;
-                let reads = score.readable && score.known_font.as_ref().is_none_or(|k| k.margin >= o.target_margin);
-                let lead = score
-                    .known_font
-                    .as_ref()
-                    .map_or(score.legibility - reference.threshold, |k| k.margin);
+                let reading = reference.target_reading(&score, o.target_margin);
+                let lead = match reading.judge {
+                    crate::evaluation::TargetJudge::KnownFont => reading.score,
+                    crate::evaluation::TargetJudge::Legibility => reading.margin(),
+                };
+                let reads = reading.reads;
                 Ok((lead, reads))
             })
             .collect::<Result<_, PipelineError>>()?;
@@ -1572,6 +1604,7 @@ fn evaluate_job(
         document_text: encoded.document_text.clone(),
         population: spec.options.evaluation_population,
         seed: encoded.seed.wrapping_add(20_000),
+        target_margin: spec.options.target_margin,
         sub_rays: spec.options.sub_rays,
         optics: spec.options.optics,
         ..Default::default()
@@ -2240,19 +2273,41 @@ mod tests {
         // A margin no view of this display reaches (every cell's true glyph ahead of the rest by 0.5 in
         // correlation) is never met: the guard halves to its floor and says the target does not read. From
         // weight 0.2 the floor is three halvings (0.025); from weight 2, halving on while the decoys weigh more
-        // than 0.0375: 1, 1/2, …, 1/16, 1/32 (six halvings, a scale of 1/64).
+        // than 0.0375: 1, 1/2, …, 1/16, 1/32 (six halvings, a scale of 1/64). The encode then fails, naming the
+        // judge, the margin reached and the one asked, instead of handing over frames the target cannot read.
         let strict = |weight: f64| {
             let mut spec = weighted(true, weight);
             spec.options.target_margin = 0.5;
-            encode(&spec, &cache, &|_| {}, &cancel).unwrap()
+            match encode(&spec, &cache, &|_| {}, &cancel) {
+                Err(PipelineError::TargetCannotRead {
+                    reading,
+                    decoy_weight_scale,
+                }) => (reading, decoy_weight_scale),
+                Err(e) => panic!("{e}"),
+                Ok(_) => panic!("frames delivered although the target does not read them"),
+            }
         };
-        let unmet = strict(0.2);
-        assert!(!unmet.solver.target_reads);
-        assert_eq!(unmet.solver.decoy_weight_scale, 0.125);
-        let unmet = strict(2.0);
-        assert!(!unmet.solver.target_reads);
-        assert_eq!(unmet.solver.decoy_weight_scale, 1.0 / 64.0);
-        assert!(2.0 * unmet.solver.decoy_weight_scale <= GUARD_FLOOR_WEIGHT);
+        let (reading, scale) = strict(0.2);
+        assert_eq!(reading.judge, crate::evaluation::TargetJudge::KnownFont);
+        assert!(
+            !reading.reads && reading.bar == 0.5 && reading.score < 0.5,
+            "{reading:?}"
+        );
+        assert_eq!(scale, 0.125);
+        let (_, scale) = strict(2.0);
+        assert_eq!(scale, 1.0 / 64.0);
+        assert!(2.0 * scale <= GUARD_FLOOR_WEIGHT);
+        let message = PipelineError::TargetCannotRead {
+            reading,
+            decoy_weight_scale: 0.125,
+        }
+        .to_string();
+        assert!(
+            message.starts_with(
+                "target_cannot_read: the target does not read its view of the frames (known-font attacker: margin"
+            ) && message.contains("asked 0.500), even with the decoys at 0.125 of their weight; what would help:"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -100,6 +100,12 @@ mod tests {
             metric: "test".into(),
             threshold: 0.5,
             target: score("target", 0.9),
+            target_reading: crate::evaluation::TargetReading {
+                judge: crate::evaluation::TargetJudge::Legibility,
+                reads: true,
+                score: 0.9,
+                bar: crate::evaluation::READS_THRESHOLD,
+            },
             observers: vec![],
             population: None,
             camera: None,

@@ -10,6 +10,13 @@ use rayon::prelude::*;
 /// Where the document's text is known, the attacker itself is the judge and this threshold only adds to it.
 pub const DEFAULT_THRESHOLD: f64 = 0.26;
 
+/// The bar a target's view must clear to be called *read* where the document's text is not known (no known-font
+/// attacker): the legibility at which the known-font attacker reads 99 % of calibration views
+/// (docs/legibility-calibration.md). The judge is asymmetric on purpose: everybody else is held under
+/// [`DEFAULT_THRESHOLD`], the level at which somebody *might* read, while the target must reach the level at which
+/// a reader almost surely *does*. A target view between the two is neither secret nor read.
+pub const READS_THRESHOLD: f64 = 0.70;
+
 /// Pixels the box around the document's ink is grown by ([`ink_box`]): a denoised glyph spreads this far.
 pub const INK_MARGIN: usize = 2;
 

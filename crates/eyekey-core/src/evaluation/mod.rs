@@ -90,7 +90,10 @@ pub fn evaluate(
     ev.pictures
         .push(("objective.png".to_string(), t_obs.picture(&objective)));
     let target_view = t_obs.view(l);
-    let target_score = ev.reference.score_lms("target", &target_view, t_obs.white);
+    let mut target_score = ev.reference.score_lms("target", &target_view, t_obs.white);
+    // The target is held to the bar at which a reader does read, not the one at which somebody might.
+    let target_reading = ev.reference.target_reading(&target_score, options.target_margin);
+    target_score.readable = target_reading.reads;
     ev.pictures
         .push(("target.png".to_string(), t_obs.picture(&target_view)));
     let target_light = mean(&luminance(&target_view));
@@ -112,6 +115,7 @@ pub fn evaluate(
                 .into(),
         threshold: options.threshold,
         target: target_score,
+        target_reading,
         observers: observer_scores,
         population,
         camera,

@@ -34,6 +34,9 @@ pub struct EvaluationOptions {
     pub document_text: Option<crate::evaluation::DocumentText>,
     /// Bystanders anywhere else (people and a focus-sweeping camera on a grid of positions); None skips them.
     pub bystanders: Option<crate::evaluation::BystanderOptions>,
+    /// Where the text is known, the known-font margin the target must read its view with to be called read
+    /// (the job's `target_margin`).
+    pub target_margin: f64,
 }
 
 impl EvaluationOptions {
@@ -71,6 +74,7 @@ impl Default for EvaluationOptions {
             saved_population_views: 3,
             document_text: None,
             bystanders: None,
+            target_margin: 0.0,
         }
     }
 }

@@ -1,7 +1,8 @@
 //! The document as the evaluation sees it: luminance on the retinal grid at the objective's level.
 
 use crate::evaluation::{
-    denoised, image_luminance, ink_box, legibility_of_denoised, luminance, ncc, psnr, ssim, ViewScore, INK_MARGIN,
+    denoised, image_luminance, ink_box, legibility_of_denoised, luminance, ncc, psnr, ssim, TargetJudge, TargetReading,
+    ViewScore, INK_MARGIN, READS_THRESHOLD,
 };
 use crate::imaging;
 use crate::physics::observer::Observer;
@@ -77,6 +78,27 @@ impl Reference {
         }
     }
 
+    /// Whether the target reads a view scored by [`Reference::score`], by the target's bar: the known-font
+    /// attacker reads every secret character with a lead of at least `margin` where the text is known, else the
+    /// legibility reaches [`READS_THRESHOLD`] (a view between [`DEFAULT_THRESHOLD`](crate::evaluation::DEFAULT_THRESHOLD)
+    /// and it is neither secret nor read).
+    pub fn target_reading(&self, score: &ViewScore, margin: f64) -> TargetReading {
+        match &score.known_font {
+            Some(k) => TargetReading {
+                judge: TargetJudge::KnownFont,
+                reads: k.correct && k.margin >= margin,
+                score: k.margin,
+                bar: margin,
+            },
+            None => TargetReading {
+                judge: TargetJudge::Legibility,
+                reads: score.legibility >= READS_THRESHOLD,
+                score: score.legibility,
+                bar: READS_THRESHOLD,
+            },
+        }
+    }
+
     /// Scores what `observer` sees of light field `l`; returns the score and the picture.
     pub fn score_observer(&self, label: &str, observer: &Observer, l: &[f32]) -> (ViewScore, RgbImage) {
         let view = observer.view(l);
@@ -87,5 +109,72 @@ impl Reference {
     pub fn score_lms(&self, label: &str, view: &[f32], white_lms: [f64; 3]) -> ViewScore {
         let white = crate::evaluation::luminance_of(white_lms);
         self.score(label, &luminance(view), white)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::{KnownFontRead, DEFAULT_THRESHOLD};
+
+    fn score(legibility: f64, known_font: Option<KnownFontRead>) -> ViewScore {
+        ViewScore {
+            label: "target".into(),
+            legibility,
+            ncc: 0.0,
+            psnr_db: 0.0,
+            ssim: 0.0,
+            readable: known_font
+                .as_ref()
+                .map_or(legibility >= DEFAULT_THRESHOLD, |k| k.correct),
+            known_font,
+        }
+    }
+
+    fn read(correct: bool, margin: f64) -> KnownFontRead {
+        KnownFontRead {
+            text: "4821".into(),
+            correct,
+            characters_right: if correct { 4 } else { 3 },
+            characters: 4,
+            confidence: 0.5,
+            margin,
+            chance: 1e-4,
+        }
+    }
+
+    #[test]
+    fn the_target_is_held_to_the_bar_at_which_a_reader_does_read_not_the_one_at_which_somebody_might() {
+        let reference = Reference::new(&RgbImage::new(8, 8), 8, 8, 0.5, DEFAULT_THRESHOLD);
+        // Without a text hint: a view somebody might read (0.30 ≥ 0.26) is not one the target reads.
+        let might = score(0.30, None);
+        assert!(might.readable);
+        let r = reference.target_reading(&might, 0.0);
+        assert_eq!(
+            (r.judge, r.reads, r.bar),
+            (TargetJudge::Legibility, false, READS_THRESHOLD)
+        );
+        assert!((r.margin() - (0.30 - READS_THRESHOLD)).abs() < 1e-12);
+        assert!(reference.target_reading(&score(READS_THRESHOLD, None), 0.0).reads);
+        assert_eq!(
+            reference.target_reading(&score(0.30, None), 0.0).describe(),
+            "does not read it (no text hint: legibility 0.30, read from 0.70)"
+        );
+        // With one: the known-font attacker decides, whatever the legibility, with the margin asked.
+        let r = reference.target_reading(&score(0.2, Some(read(true, 0.03))), 0.02);
+        assert_eq!(
+            (r.judge, r.reads, r.score, r.bar),
+            (TargetJudge::KnownFont, true, 0.03, 0.02)
+        );
+        assert!(
+            !reference
+                .target_reading(&score(0.9, Some(read(true, 0.01))), 0.02)
+                .reads
+        );
+        assert!(
+            !reference
+                .target_reading(&score(0.9, Some(read(false, -0.01))), 0.0)
+                .reads
+        );
     }
 }

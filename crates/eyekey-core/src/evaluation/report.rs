@@ -22,8 +22,59 @@ pub struct ViewScore {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font: Option<crate::evaluation::KnownFontRead>,
     /// The known-font attacker read every secret character (when the document's text is known); otherwise
-    /// legibility ≥ threshold.
+    /// legibility ≥ threshold: somebody *might* read it. For the report's target, whether the target *reads* it,
+    /// by the target's stricter bar ([`Report::target_reading`]).
     pub readable: bool,
+}
+
+/// Which judge decided whether the target reads ([`TargetReading`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum TargetJudge {
+    /// The known-font attacker (the document's text, font and layout are known): every secret character read
+    /// right, with the true glyph's lead over the best other at least the margin asked.
+    KnownFont,
+    /// Legibility (nothing known of the text): at least [`READS_THRESHOLD`](crate::evaluation::READS_THRESHOLD),
+    /// the level at which the known-font attacker reads 99 % of calibration views.
+    Legibility,
+}
+
+/// Whether the target reads its view, which judge decided, and by how much.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct TargetReading {
+    /// The judge.
+    pub judge: TargetJudge,
+    /// Whether the target reads: every secret character right and `score` ≥ `bar`.
+    pub reads: bool,
+    /// What the judge measured: the known-font margin (the true glyph's smallest lead, negative when a character
+    /// is misread) or the legibility.
+    pub score: f64,
+    /// The bar `score` must reach: the margin asked (`target_margin`) or the reads threshold.
+    pub bar: f64,
+}
+
+impl TargetReading {
+    /// `score` − `bar`: how far the view is past the bar (negative: short of it).
+    pub fn margin(&self) -> f64 {
+        self.score - self.bar
+    }
+
+    /// The verdict with its evidence, for people: "reads it (known-font attacker: margin 0.112, asked 0.000)".
+    pub fn describe(&self) -> String {
+        let verdict = if self.reads { "reads it" } else { "does not read it" };
+        format!("{verdict} ({})", self.evidence())
+    }
+
+    /// What the judge measured against what it asked: "known-font attacker: margin 0.112, asked 0.000", or "no
+    /// text hint: legibility 0.31, read from 0.70".
+    pub fn evidence(&self) -> String {
+        match self.judge {
+            TargetJudge::KnownFont => format!("known-font attacker: margin {:.3}, asked {:.3}", self.score, self.bar),
+            TargetJudge::Legibility => format!("no text hint: legibility {:.2}, read from {:.2}", self.score, self.bar),
+        }
+    }
 }
 
 /// Summary of the population's readability.
@@ -175,6 +226,8 @@ pub struct Report {
     pub threshold: f64,
     /// The target.
     pub target: ViewScore,
+    /// Whether the target reads its view, by the target's bar: which judge decided and its margin.
+    pub target_reading: TargetReading,
     /// Given observers.
     pub observers: Vec<ViewScore>,
     /// Sampled people.
