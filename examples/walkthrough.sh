@@ -121,9 +121,12 @@ while :; do
     sleep 1
 done
 EVALUATION=$(op GET "/v1/jobs/$JOB/evaluation")
-echo "the server's evaluation (legibility 0..1; readable from $(printf '%s' "$EVALUATION" | json .threshold)):"
-printf '  target                   %.2f\n' "$(printf '%s' "$EVALUATION" | json .target.legibility)"
-printf '  representative observer  %.2f\n' "$(printf '%s' "$EVALUATION" | json ".observers[0].legibility")"
+echo "the server's evaluation (legibility 0..1):"
+printf '  target                   %.2f: %s (it must reach %.2f)\n' "$(printf '%s' "$EVALUATION" | json .target.legibility)" \
+    "$(printf '%s' "$EVALUATION" | json .target_reading.reads | sed 's/true/reads it/; s/false/does not read it/')" \
+    "$(printf '%s' "$EVALUATION" | json .target_reading.bar)"
+printf '  representative observer  %.2f (somebody might read from %.2f)\n' \
+    "$(printf '%s' "$EVALUATION" | json ".observers[0].legibility")" "$(printf '%s' "$EVALUATION" | json .threshold)"
 
 say "5. Downloading the bundle with the display's token"
 curl -fsS -H "Authorization: Bearer $DISPLAY_TOKEN" -o "$WORK/bundle.zip" "$URL/v1/frames/jobs/$JOB/bundle.zip"
