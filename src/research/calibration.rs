@@ -1,7 +1,9 @@
 //! Views for calibrating the legibility threshold against the known-font attacker and OCR
 //! (`eyekey experiment calibrate`).
 //!
-//! Every view shows a random 4-digit PIN and spans the range from plainly legible to unreadable:
+//! Every view shows a random 4-digit PIN, in one of several fonts (eyekey's 5×7 and TrueType fonts from Debian's
+//! packages, [`super::fonts::CALIBRATION_FONTS`]) and layouts ([`super::fonts::CALIBRATION_LAYOUTS`]: alone or under
+//! a label, large or small), and the views span the range from plainly legible to unreadable:
 //!
 //! - `plain`: the PIN on an ordinary 2D display, seen by sampled people with an uncorrected defocus of up to
 //!   ±2 D (blurred but often legible);
@@ -10,10 +12,12 @@
 //!   and by an ideal camera-like eye (standard cones, 4 mm aperture) focused within ±1 D.
 //!
 //! Each view is scored with [`eyekey_core::evaluation::Reference::score`] (legibility and plain NCC), read by the
-//! known-font attacker ([`eyekey_core::evaluation::KnownFontAttacker`]) and written as the picture an attacker
+//! known-font attacker for its own font and layout ([`eyekey_core::evaluation::KnownFontAttacker`]) and written as the picture an attacker
 //! would start from: luminance stretched to 0..255, upscaled ×4 (bilinear), 8-bit grey. `views.csv` lists
-//! `file,text,legibility,ncc,known_font,characters_right,kind`; `calibration.md` tabulates the known-font
-//! attacker's reads against legibility and chooses the threshold ([`known_font_table`]);
+//! `file,text,legibility,ncc,known_font,characters_right,kind,font,layout`; `calibration.md` tabulates the
+//! known-font attacker's reads against legibility, over all fonts and per font, and derives both bars
+//! ([`known_font_table`]): the might-read threshold everybody but the target is held under and the reads
+//! threshold the target must reach;
 //! `benches/calibrate_ocr.sh` OCRs the same views.
 
 use eyekey_core::physics::transport::TransportCache;
@@ -26,10 +30,10 @@ use anyhow::{Context, Result};
 use image::{GrayImage, Luma, RgbImage};
 use rand::{Rng, SeedableRng};
 
+use super::fonts::{draw_layout, DocFont, DrawnText};
+
 use eyekey_core::encoding::pipeline::{encode, DecoyKind, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
-use eyekey_core::evaluation::{
-    luminance, stretch_to_unit, DocumentText, KnownFontAttacker, Reference, DEFAULT_THRESHOLD,
-};
+use eyekey_core::evaluation::{luminance, stretch_to_unit, Reference, DEFAULT_THRESHOLD, READS_THRESHOLD};
 use eyekey_core::physics::display::DisplayGeometry;
 use eyekey_core::physics::observer::{plain_light_field_for_image, Observer, Optics};
 use eyekey_core::physics::population::{sample_person, SamplingScope};
@@ -61,6 +65,8 @@ struct Setup {
     cameras_per_encoding: usize,
     /// Sampled people kept in the viewing pool (their operators are reused between encodings).
     pool: usize,
+    /// The fonts the documents are drawn in ([`super::fonts::DocFont::load`] names), cycled with the layouts.
+    fonts: Vec<String>,
 }
 
 impl Setup {
@@ -82,6 +88,7 @@ impl Setup {
             people_per_encoding: 10,
             cameras_per_encoding: 2,
             pool: 30,
+            fonts: super::fonts::CALIBRATION_FONTS.iter().map(|f| f.to_string()).collect(),
         }
     }
 }
@@ -90,6 +97,15 @@ impl Setup {
 /// `scale` pixels per font dot.
 pub fn pin_document(pin: &str, width: u32, height: u32, scale: u32) -> RgbImage {
     eyekey_core::imaging::glyphs::render_text(&[pin], width, height, scale)
+}
+
+/// One calibration document: the PIN, the document drawn in some font and layout with its attacker, and a tag
+/// naming both.
+struct Document {
+    pin: String,
+    drawn: DrawnText,
+    font: String,
+    layout: String,
 }
 
 /// Writes `count` views with known text, their legibility and the known-font attacker's readings into
@@ -107,6 +123,8 @@ struct View {
     /// Digits the known-font attacker got right.
     characters_right: u32,
     kind: String,
+    font: String,
+    layout: String,
     luminance: Vec<f32>,
 }
 
@@ -149,7 +167,7 @@ impl<'a> ViewWriter<'a> {
             width,
             height,
             written: 0,
-            csv: String::from("file,text,legibility,ncc,known_font,characters_right,kind\n"),
+            csv: String::from("file,text,legibility,ncc,known_font,characters_right,kind,font,layout\n"),
             rows: Vec::new(),
         }
     }
@@ -162,14 +180,15 @@ impl<'a> ViewWriter<'a> {
             .with_context(|| format!("writing {file}"))?;
         writeln!(
             self.csv,
-            "{file},{},{:.6},{:.6},{},{},{}",
-            v.text, v.legibility, v.ncc, v.known_font, v.characters_right, v.kind
+            "{file},{},{:.6},{:.6},{},{},{},{},{}",
+            v.text, v.legibility, v.ncc, v.known_font, v.characters_right, v.kind, v.font, v.layout
         )?;
         self.rows.push(CalibrationRow {
             legibility: v.legibility,
             read: v.known_font,
             characters_right: v.characters_right,
             kind: v.kind.split(' ').next().unwrap_or("").to_string(),
+            font: v.font,
         });
         self.written += 1;
         Ok(())
@@ -184,29 +203,26 @@ impl<'a> ViewWriter<'a> {
     }
 }
 
-/// Scores what observer `o` sees of light field `l` against `doc`, the PIN `pin` drawn at `scale` pixels per
-/// font dot: legibility, NCC and the known-font attacker's reading.
-fn score(doc: &RgbImage, pin: &str, scale: u32, o: &Observer, l: &[f32], kind: String) -> Result<View> {
+/// Scores what observer `o` sees of light field `l` against document `d`: legibility, NCC and the reading of the
+/// known-font attacker for its font and layout (made for a retinal grid of one pixel per hole, as `o`'s is).
+fn score(d: &Document, o: &Observer, l: &[f32], kind: String) -> Result<View> {
     let g = o.grid();
-    let text = DocumentText {
-        lines: vec![pin.to_string()],
-        scale,
-        alphabet: "0123456789".into(),
-    };
-    let attacker = KnownFontAttacker::new(&text, doc.width(), doc.height(), g.width, g.height)?;
-    let reference =
-        Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD).with_known_font(attacker);
+    let doc = &d.drawn.document;
+    let reference = Reference::new(doc, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD)
+        .with_known_font(d.drawn.attacker.clone());
     let lum = luminance(&o.view(l));
     let white = eyekey_core::evaluation::luminance_of(o.white);
     let s = reference.score("", &lum, white);
     let read = s.known_font.expect("the reference has a known-font attacker");
     Ok(View {
-        text: pin.to_string(),
+        text: d.pin.clone(),
         legibility: s.legibility,
         ncc: s.ncc,
         known_font: read.correct,
         characters_right: read.characters_right,
         kind,
+        font: d.font.clone(),
+        layout: d.layout.clone(),
         luminance: lum,
     })
 }
@@ -218,8 +234,8 @@ struct Views<'a> {
     cache: TransportCache,
     /// The viewers' transport options: the evaluation's own sub-ray jitter, different from every encoder's.
     topts: TransportOptions,
-    /// Text sizes, pixels per font dot.
-    scales: Vec<u32>,
+    /// The fonts of the documents.
+    fonts: Vec<DocFont>,
     /// Sampled people who look at the encodings.
     pool: Vec<VisionProfile>,
     /// (decoys, weight) combinations of the encodings, visited `stride` apart (a stride coprime to their
@@ -232,17 +248,18 @@ struct Views<'a> {
 
 impl<'a> Views<'a> {
     /// Prepares a run; draws the viewing pool from `rng`.
-    fn new(setup: &'a Setup, seed: u64, rng: &mut impl Rng) -> Self {
+    fn new(setup: &'a Setup, seed: u64, rng: &mut impl Rng) -> Result<Self> {
         let started = Instant::now();
         let topts = TransportOptions {
             sub_rays: setup.view_sub_rays,
             seed: seed ^ 0xCA11_B8A7,
             ..Default::default()
         };
-        // Two text sizes: digits filling the width but for a margin (2 px per font dot where the grid allows)
-        // and the dense 1 px per dot of the experiments' PIN slips.
-        let big = (setup.display.holes_x.saturating_sub(4) / 24).max(1);
-        let scales = if big > 1 { vec![big, 1] } else { vec![1] };
+        let fonts = setup
+            .fonts
+            .iter()
+            .map(|f| DocFont::load(f))
+            .collect::<Result<Vec<_>>>()?;
         let pool = (0..setup.pool.max(1))
             .map(|_| sample_person(&mut *rng, SamplingScope::default()))
             .collect();
@@ -254,18 +271,35 @@ impl<'a> Views<'a> {
         let stride = (combos.len() / 3 + 1..combos.len())
             .find(|s| gcd(*s, combos.len()) == 1)
             .unwrap_or(1);
-        Self {
+        Ok(Self {
             setup,
             seed,
             cache: TransportCache::default(),
             topts,
-            scales,
+            fonts,
             pool,
             combos,
             stride,
             cancel: AtomicBool::new(false),
             started,
-        }
+        })
+    }
+
+    /// Document `k`: a random PIN in font `k` mod the fonts, in layout `k / fonts` mod the layouts, one pixel per
+    /// hole.
+    fn document(&self, k: usize, rng: &mut impl Rng) -> Result<Document> {
+        let d = &self.setup.display;
+        let font = &self.fonts[k % self.fonts.len()];
+        let layouts = &super::fonts::CALIBRATION_LAYOUTS;
+        let layout = &layouts[(k / self.fonts.len()) % layouts.len()];
+        let pin = random_pin(rng);
+        let drawn = draw_layout(font, layout, &pin, d.holes_x, d.holes_y, (d.holes_x, d.holes_y))?;
+        Ok(Document {
+            pin,
+            drawn,
+            font: font.name().to_string(),
+            layout: layout.name(),
+        })
     }
 
     /// A viewer's operator on the display.
@@ -283,9 +317,7 @@ impl<'a> Views<'a> {
     /// View `k` of the plain display: a sampled person with an uncorrected defocus (more of them near focus).
     fn plain_view(&self, k: usize, rng: &mut impl Rng) -> Result<View> {
         let d = &self.setup.display;
-        let pin = random_pin(rng);
-        let scale = self.scales[k % self.scales.len()];
-        let doc = pin_document(&pin, d.holes_x, d.holes_y, scale);
+        let doc = self.document(k, rng)?;
         let mut person = sample_person(&mut *rng, SamplingScope::default());
         let u: f64 = rng.gen_range(-1.0..=1.0);
         let defocus = 2.0 * u * u.abs();
@@ -295,11 +327,8 @@ impl<'a> Views<'a> {
             axis_deg: 0.0,
         });
         let o = self.observer(&person)?;
-        let kind = format!(
-            "plain defocus={defocus:+.2}D pupil={:.1}mm scale={scale}",
-            person.pupil_diameter_mm
-        );
-        score(&doc, &pin, scale, &o, &plain_light_field_for_image(d, &doc), kind)
+        let kind = format!("plain defocus={defocus:+.2}D pupil={:.1}mm", person.pupil_diameter_mm);
+        score(&doc, &o, &plain_light_field_for_image(d, &doc.drawn.document), kind)
     }
 
     /// Encodes document `doc` for `target` with `decoys` noise decoys of `weight` (view set `e`).
@@ -365,25 +394,25 @@ impl<'a> Views<'a> {
     /// View set `e`: a random PIN encoded for a sampled target with the set's (decoys, weight), written as seen
     /// by each of its viewers until `count` views exist.
     fn view_set(&self, e: usize, out: &mut ViewWriter, count: usize, rng: &mut impl Rng) -> Result<()> {
-        let d = &self.setup.display;
         let (decoys, weight) = self.combos[(e * self.stride) % self.combos.len()];
-        let scale = self.scales[(e / self.combos.len() + e) % self.scales.len()];
-        let pin = random_pin(rng);
-        let doc = pin_document(&pin, d.holes_x, d.holes_y, scale);
+        let doc = self.document(e, rng)?;
         let scope = SamplingScope {
             pupil_spread: false,
             ..Default::default()
         };
         let target = sample_person(&mut *rng, scope);
         let t = Instant::now();
-        let l = self.encode(e, &doc, &target, decoys, weight)?;
-        let tag = format!("decoys={decoys} weight={weight} scale={scale}");
+        let l = self.encode(e, &doc.drawn.document, &target, decoys, weight)?;
+        let tag = format!(
+            "decoys={decoys} weight={weight} font={} layout={}",
+            doc.font, doc.layout
+        );
         let mut legs = Vec::new();
         for (kind, o) in self.viewers(e, &target, &tag, rng)? {
             if out.written >= count {
                 break;
             }
-            let v = score(&doc, &pin, scale, &o, &l, kind)?;
+            let v = score(&doc, &o, &l, kind)?;
             legs.push(v.legibility);
             out.push(v)?;
         }
@@ -408,7 +437,7 @@ impl<'a> Views<'a> {
 fn views_with(out_dir: &Path, count: usize, seed: u64, setup: &Setup) -> Result<String> {
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let views = Views::new(setup, seed, &mut rng);
+    let views = Views::new(setup, seed, &mut rng)?;
     let mut out = ViewWriter::new(out_dir, setup.display.holes_x, setup.display.holes_y);
     let n_plain = if count >= 2 { count / 4 } else { 0 };
     for k in 0..n_plain {
@@ -431,6 +460,8 @@ struct CalibrationRow {
     characters_right: u32,
     /// `plain`, `target`, `person` or `camera`.
     kind: String,
+    /// The document's font.
+    font: String,
 }
 
 /// Maximum-likelihood logistic fit P(read) = 1/(1 + exp(−(a + b·legibility))) by Newton's method (the
@@ -576,7 +607,89 @@ fn known_font_table(rows: &[CalibrationRow]) -> Result<String> {
         md,
         "Threshold this calibration supports: **{chosen:.2}** (the lowest legibility at which the known-font attacker read a view, rounded down to 0.01); the evaluation's `DEFAULT_THRESHOLD` is {DEFAULT_THRESHOLD}."
     )?;
+    reads_table(&mut md, rows, logistic_fit(rows))?;
     Ok(md)
+}
+
+/// Views (at or above `t`, read among them) of `rows`.
+fn at_or_above(rows: &[&CalibrationRow], t: f64) -> (usize, usize) {
+    let above: Vec<&&CalibrationRow> = rows.iter().filter(|r| r.legibility >= t).collect();
+    (above.len(), above.iter().filter(|r| r.read).count())
+}
+
+/// Fewest views at or above a candidate reads bar, per font, for the font to count in choosing it.
+const READS_MIN_VIEWS: usize = 10;
+
+/// The reads bar the calibration supports: the lowest legibility t (in steps of 0.01) at or above which at least 99 %
+/// of the views of every font (with [`READS_MIN_VIEWS`] or more there) and of all fonts together are read, and at
+/// least the logistic fit's 99 % point; 1.0 when nothing qualifies.
+fn supported_reads_bar(rows: &[CalibrationRow], fit: Option<(f64, f64)>) -> f64 {
+    let mut fonts: Vec<&str> = rows.iter().map(|r| r.font.as_str()).collect();
+    fonts.sort_unstable();
+    fonts.dedup();
+    let all: Vec<&CalibrationRow> = rows.iter().collect();
+    let holds = |t: f64| {
+        let (n, read) = at_or_above(&all, t);
+        n > 0 && read as f64 >= 0.99 * n as f64 && {
+            fonts.iter().all(|f| {
+                let of: Vec<&CalibrationRow> = rows.iter().filter(|r| r.font == *f).collect();
+                let (n, read) = at_or_above(&of, t);
+                n < READS_MIN_VIEWS || read as f64 >= 0.99 * n as f64
+            })
+        }
+    };
+    let by_views = (0..=100).map(|k| k as f64 / 100.0).find(|&t| holds(t)).unwrap_or(1.0);
+    let by_fit = fit.map_or(0.0, |(a, b)| ((0.99f64 / 0.01).ln() - a) / b);
+    (by_views.max((by_fit * 100.0).ceil() / 100.0)).min(1.0)
+}
+
+/// The target's side: per font, what the known-font attacker read, and the reads bar the views support.
+fn reads_table(md: &mut String, rows: &[CalibrationRow], fit: Option<(f64, f64)>) -> Result<()> {
+    let bar = supported_reads_bar(rows, fit);
+    writeln!(md)?;
+    writeln!(
+        md,
+        "| font | views | read | lowest legibility read | highest not read | at or above {bar:.2}: read | at or above {READS_THRESHOLD:.2}: read |"
+    )?;
+    writeln!(md, "| --- | --- | --- | --- | --- | --- | --- |")?;
+    let mut fonts: Vec<&str> = rows.iter().map(|r| r.font.as_str()).collect();
+    fonts.sort_unstable();
+    fonts.dedup();
+    let mut line = |name: &str, of: Vec<&CalibrationRow>| -> Result<()> {
+        let read = of.iter().filter(|r| r.read).count();
+        let lowest = of
+            .iter()
+            .filter(|r| r.read)
+            .map(|r| r.legibility)
+            .fold(f64::INFINITY, f64::min);
+        let missed = of
+            .iter()
+            .filter(|r| !r.read)
+            .map(|r| r.legibility)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let cell = |v: f64| if v.is_finite() { format!("{v:.3}") } else { "–".into() };
+        let frac = |(n, k): (usize, usize)| format!("{k} of {n}");
+        writeln!(
+            md,
+            "| {name} | {} | {read} | {} | {} | {} | {} |",
+            of.len(),
+            cell(lowest),
+            cell(missed),
+            frac(at_or_above(&of, bar)),
+            frac(at_or_above(&of, READS_THRESHOLD))
+        )?;
+        Ok(())
+    };
+    for f in &fonts {
+        line(f, rows.iter().filter(|r| r.font == *f).collect())?;
+    }
+    line("all", rows.iter().collect())?;
+    writeln!(md)?;
+    writeln!(
+        md,
+        "Reads bar this calibration supports: **{bar:.2}** (the lowest legibility at or above which the known-font attacker reads at least 99 % of every font's views, and the logistic fit's 99 % point); the evaluation's `READS_THRESHOLD` is {READS_THRESHOLD}."
+    )?;
+    Ok(())
 }
 
 fn gcd(a: usize, b: usize) -> usize {
@@ -612,6 +725,7 @@ mod tests {
             people_per_encoding: 2,
             cameras_per_encoding: 1,
             pool: 2,
+            fonts: vec!["5x7".into(), "DejaVuSans.ttf".into()],
         };
         let md = views_with(dir.path(), 6, 1, &setup).unwrap();
         assert!(md.contains("| legibility | views |"), "{md}");
@@ -620,13 +734,13 @@ mod tests {
         let mut lines = csv.lines();
         assert_eq!(
             lines.next(),
-            Some("file,text,legibility,ncc,known_font,characters_right,kind")
+            Some("file,text,legibility,ncc,known_font,characters_right,kind,font,layout")
         );
         let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
         assert_eq!(rows.len(), 6);
         let mut kinds = std::collections::BTreeSet::new();
         for r in &rows {
-            assert_eq!(r.len(), 7, "{r:?}");
+            assert_eq!(r.len(), 9, "{r:?}");
             assert!(r[1].len() == 4 && r[1].chars().all(|c| c.is_ascii_digit()), "{r:?}");
             let leg: f64 = r[2].parse().unwrap();
             let ncc: f64 = r[3].parse().unwrap();
@@ -651,6 +765,7 @@ mod tests {
             read,
             characters_right: if read { 4 } else { 1 },
             kind: "person".into(),
+            font: "5x7".into(),
         }
     }
 
@@ -667,6 +782,29 @@ mod tests {
         assert!((b - 2.0 * 3f64.ln()).abs() < 1e-8, "{b}");
         // Perfectly separated reads have no finite maximum.
         assert!(logistic_fit(&[row(0.1, false), row(0.9, true)]).is_none());
+    }
+
+    #[test]
+    fn the_supported_reads_bar_is_where_every_font_is_read_at_99_percent() {
+        // Font a: ten views read at 0.80, one missed at 0.65; font b: ten read at 0.75, one missed at 0.72. At 0.72
+        // font b is read in 10 of 11 views; from 0.73 every font's views are all read. Separable reads have no
+        // logistic fit, so the views alone decide.
+        let mut rows: Vec<CalibrationRow> = Vec::new();
+        for (font, read_at, missed_at) in [("a", 0.80, 0.65), ("b", 0.75, 0.72)] {
+            rows.extend((0..10).map(|_| CalibrationRow {
+                font: font.into(),
+                ..row(read_at, true)
+            }));
+            rows.push(CalibrationRow {
+                font: font.into(),
+                ..row(missed_at, false)
+            });
+        }
+        assert!(logistic_fit(&rows).is_none());
+        assert!((supported_reads_bar(&rows, None) - 0.73).abs() < 1e-12);
+        // A fit whose 99 % point lies higher raises the bar to it: logit(0.99) = ln 99 at a + b·x.
+        let (a, b) = (0.0, 99f64.ln() / 0.9);
+        assert!((supported_reads_bar(&rows, Some((a, b))) - 0.90).abs() < 1e-9);
     }
 
     #[test]

@@ -7,6 +7,7 @@ pub mod calibration;
 pub mod defaults;
 pub mod encoders;
 pub mod experiment;
+pub mod fonts;
 pub mod scale;
 pub mod wave;
 

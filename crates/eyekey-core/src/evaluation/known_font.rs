@@ -213,18 +213,14 @@ impl KnownFontAttacker {
         }
         let lines: Vec<&str> = text.lines.iter().map(String::as_str).collect();
         let layout = glyphs::text_cells(&lines, doc_width, doc_height, text.scale);
-        let (fx, fy) = (
-            grid_width as f64 / doc_width as f64,
-            grid_height as f64 / doc_height as f64,
-        );
-        let mut cells = Vec::new();
+        let mut secret = Vec::new();
         for (index, g) in layout.iter().enumerate() {
             let ch = g.ch.to_ascii_uppercase();
             if !alphabet.contains(&ch) {
                 continue;
             }
             // The character's cell: 6×9 font dots around its 5×7 glyph (half a dot either side, one above and
-            // one below), in document pixels, then on the grid.
+            // one below), in document pixels.
             let s = g.scale as f64;
             let (dx0, dy0) = (g.x as f64 - 0.5 * s, g.y as f64 - s);
             let (dx1, dy1) = (dx0 + 6.0 * s, dy0 + 9.0 * s);
@@ -236,22 +232,70 @@ impl KnownFontAttacker {
                     height: doc_height,
                 });
             }
-            let x0 = (dx0 * fx).floor() as usize;
-            let y0 = (dy0 * fy).floor() as usize;
-            let x1 = ((dx1 * fx).ceil() as usize).min(grid_width as usize);
-            let y1 = ((dy1 * fy).ceil() as usize).min(grid_height as usize);
-            let (w, h) = (x1 - x0, y1 - y0);
+            secret.push((ch, [dx0, dy0, dx1, dy1], (g.x, g.y, g.scale)));
+        }
+        let cells: Vec<(char, [f64; 4])> = secret.iter().map(|(c, b, _)| (*c, *b)).collect();
+        Self::from_drawn(
+            &alphabet,
+            &cells,
+            (doc_width, doc_height),
+            (grid_width, grid_height),
+            |k, c| {
+                let (x, y, scale) = secret[k].2;
+                let mut doc = RgbImage::from_pixel(doc_width, doc_height, Rgb([255, 255, 255]));
+                glyphs::draw_glyph(&mut doc, c, x, y, scale);
+                doc
+            },
+        )
+    }
+
+    /// The attacker for a document in any font: `cells` are its secret characters (the character drawn and its
+    /// cell's box on the document, x0, y0, x1, y1 in pixels), and `draw(k, c)` is the document with only character
+    /// `c` drawn in cell `k`, black on white, `doc` pixels large; views are read on a `grid`-sized retinal grid.
+    /// Each candidate's template is that drawing resized to the grid as the document is, cropped to the cell.
+    pub fn from_drawn(
+        alphabet: &[char],
+        cells: &[(char, [f64; 4])],
+        doc: (u32, u32),
+        grid: (u32, u32),
+        draw: impl Fn(usize, char) -> RgbImage,
+    ) -> Result<Self, KnownFontError> {
+        let mut alphabet = alphabet.to_vec();
+        alphabet.sort_unstable();
+        alphabet.dedup();
+        if alphabet.len() < 2 {
+            return Err(KnownFontError::Alphabet("needs at least two characters".into()));
+        }
+        let (fx, fy) = (grid.0 as f64 / doc.0 as f64, grid.1 as f64 / doc.1 as f64);
+        let mut out = Vec::with_capacity(cells.len());
+        for (k, &(truth, [dx0, dy0, dx1, dy1])) in cells.iter().enumerate() {
+            if !alphabet.contains(&truth) {
+                return Err(KnownFontError::Alphabet(format!(
+                    "'{truth}' is drawn but not in the alphabet"
+                )));
+            }
+            let x0 = (dx0.max(0.0) * fx).floor() as usize;
+            let y0 = (dy0.max(0.0) * fy).floor() as usize;
+            let x1 = ((dx1 * fx).ceil() as usize).min(grid.0 as usize);
+            let y1 = ((dy1 * fy).ceil() as usize).min(grid.1 as usize);
+            let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+            if w == 0 || h == 0 {
+                return Err(KnownFontError::OutsideDocument {
+                    index: k,
+                    ch: truth,
+                    width: doc.0,
+                    height: doc.1,
+                });
+            }
             let templates = alphabet
                 .iter()
                 .map(|&c| {
-                    let mut doc = RgbImage::from_pixel(doc_width, doc_height, Rgb([255, 255, 255]));
-                    glyphs::draw_glyph(&mut doc, c, g.x, g.y, g.scale);
-                    let lum = image_luminance(&imaging::resize(&doc, grid_width, grid_height));
-                    crop(&lum, grid_width as usize, x0 as isize, y0 as isize, w, h)
+                    let lum = image_luminance(&imaging::resize(&draw(k, c), grid.0, grid.1));
+                    crop(&lum, grid.0 as usize, x0 as isize, y0 as isize, w, h)
                 })
                 .collect();
-            cells.push(Cell {
-                truth: ch,
+            out.push(Cell {
+                truth,
                 x0,
                 y0,
                 w,
@@ -259,14 +303,14 @@ impl KnownFontAttacker {
                 templates,
             });
         }
-        if cells.is_empty() {
+        if out.is_empty() {
             return Err(KnownFontError::NothingSecret);
         }
         Ok(Self {
             alphabet,
-            cells,
-            width: grid_width as usize,
-            height: grid_height as usize,
+            cells: out,
+            width: grid.0 as usize,
+            height: grid.1 as usize,
         })
     }
 
