@@ -161,7 +161,7 @@ pub async fn seal_unsealed(state: &AppState) -> anyhow::Result<(usize, usize)> {
     for doc in &docs {
         let plain_path = state.data_dir().join(&doc.path);
         let bytes = tokio::fs::read(&plain_path).await?;
-        let stored = sealed::store_document(&state.objects, &state.master_key, &doc.id, bytes.into()).await?;
+        let stored = sealed::store_document(&state.objects, &state.master_key, &doc.id, bytes.into(), None).await?;
         store::documents::set_sealed(
             &state.writer,
             &doc.id,

@@ -63,17 +63,39 @@ pub struct StoredDocument {
     pub data_key: Vec<u8>,
     /// Keyed HMAC-SHA256 of the bytes, hex.
     pub content_mac: String,
+    /// The layout given with the bytes, sealed under the same data key (for `documents.sealed_layout`).
+    pub sealed_layout: Option<Vec<u8>>,
 }
 
-/// Seals a document's bytes under a new data key and stores them as `documents/<id>.sealed`.
+/// Associated data of a document's sealed layout.
+pub fn document_layout_aad(id: &str) -> Vec<u8> {
+    format!("eyekey-document:{id}:layout").into_bytes()
+}
+
+/// A document's layout (a document rendered from text), opened under its data key; None for an upload.
+pub fn document_layout(
+    master: &MasterKey,
+    doc: &DocumentRow,
+) -> anyhow::Result<Option<eyekey_core::evaluation::DocumentText>> {
+    let Some(sealed) = &doc.sealed_layout else {
+        return Ok(None);
+    };
+    let key = unwrap_key(master, doc.data_key.as_deref(), &document_key_aad(&doc.id))?;
+    let plain = key.open(sealed, &document_layout_aad(&doc.id))?;
+    Ok(Some(serde_json::from_slice(&plain)?))
+}
+
+/// Seals a document's bytes (and the layout of one rendered from text, its `DocumentText` JSON) under a new data
+/// key and stores the bytes as `documents/<id>.sealed`; the sealed layout is returned for the document's row.
 pub async fn store_document(
     objects: &Objects,
     master: &MasterKey,
     id: &str,
     bytes: axum::body::Bytes,
+    layout: Option<Vec<u8>>,
 ) -> std::io::Result<StoredDocument> {
     let (master, doc_id) = (master.clone(), id.to_string());
-    let (sealed, data_key, content_mac) = tokio::task::spawn_blocking(move || {
+    let (sealed, data_key, content_mac, sealed_layout) = tokio::task::spawn_blocking(move || {
         let key = DataKey::generate();
         let data_key = key
             .wrap(&master, &document_key_aad(&doc_id))
@@ -81,7 +103,11 @@ pub async fn store_document(
         let sealed = key
             .seal(&bytes, &document_aad(&doc_id))
             .map_err(std::io::Error::other)?;
-        Ok::<_, std::io::Error>((sealed, data_key, master.digest(DOCUMENT_MAC, &bytes)))
+        let sealed_layout = layout
+            .map(|l| key.seal(&l, &document_layout_aad(&doc_id)))
+            .transpose()
+            .map_err(std::io::Error::other)?;
+        Ok::<_, std::io::Error>((sealed, data_key, master.digest(DOCUMENT_MAC, &bytes), sealed_layout))
     })
     .await
     .map_err(std::io::Error::other)??;
@@ -91,6 +117,7 @@ pub async fn store_document(
         path,
         data_key,
         content_mac,
+        sealed_layout,
     })
 }
 

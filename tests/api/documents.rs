@@ -270,3 +270,53 @@ async fn a_document_rendered_from_text_is_the_font_drawn_image_and_bad_layouts_n
         expect_error(r, StatusCode::FORBIDDEN, "forbidden").await;
     }
 }
+
+#[tokio::test]
+async fn a_document_rendered_from_text_keeps_its_layout_sealed_and_jobs_on_it_are_judged_by_the_known_font_attacker() {
+    let app = spawn_app().await;
+    let f = app.fixtures().await;
+    let body = serde_json::json!({ "lines": ["PIN", "4821"], "width": 48, "height": 48, "scale": 2 });
+    let doc = expect_json(app.op_post("/v1/documents/text", &body).await, StatusCode::CREATED).await;
+    assert_eq!(doc["keeps_layout"], true, "{doc}");
+    let id = doc["id"].as_str().unwrap();
+    // The job gives no hint: it takes the document's own, and states it to the operator.
+    let mut job = crate::helpers::job_body(&f);
+    job["document_id"] = serde_json::json!(id);
+    let created = expect_json(app.op_post("/v1/jobs", &job).await, StatusCode::CREATED).await;
+    assert_eq!(
+        created["options"]["document_text"],
+        serde_json::json!({ "lines": ["PIN", "4821"], "scale": 2, "alphabet": "0123456789" }),
+        "{created}"
+    );
+    // A hint the operator gives wins.
+    job["options"]["document_text"] =
+        serde_json::json!({ "lines": ["PIN", "****"], "scale": 2, "alphabet": "0123456789" });
+    let given = expect_json(app.op_post("/v1/jobs", &job).await, StatusCode::CREATED).await;
+    assert_eq!(given["options"]["document_text"]["lines"][1], "****");
+    // The layout is sealed: its text is nowhere in the clear at rest (the database included).
+    let mut stack = vec![app.data_dir.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if let Ok(bytes) = std::fs::read(&path) {
+                assert!(
+                    !bytes.windows(6).any(|w| w == b"\"4821\""),
+                    "{} holds the PIN",
+                    path.display()
+                );
+            }
+        }
+    }
+    // An upload keeps none, and a text with no secret character keeps none either.
+    let up = expect_json(
+        upload(&app, "image/png", document_png(30, 20)).await,
+        StatusCode::CREATED,
+    )
+    .await;
+    assert_eq!(up["keeps_layout"], false);
+    let plain = serde_json::json!({ "lines": ["HELLO"], "width": 48, "height": 48, "scale": 1 });
+    let plain = expect_json(app.op_post("/v1/documents/text", &plain).await, StatusCode::CREATED).await;
+    assert_eq!(plain["keeps_layout"], false);
+}

@@ -427,7 +427,7 @@ async fn a_job_whose_target_cannot_read_its_frames_fails_with_target_cannot_read
     assert!(
         error.starts_with(
             "target_cannot_read: the target does not read its view of the frames (no text hint: legibility"
-        ) && error.contains("read from 0.70")
+        ) && error.contains("read from 0.80")
             && error.contains("what would help"),
         "{error}"
     );

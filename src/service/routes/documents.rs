@@ -41,8 +41,8 @@ pub fn router(max_document_bytes: usize) -> Router<AppState> {
 }
 
 /// Body of a rendered document: lines of text drawn in eyekey's 5×7 font, black on white, centred (what
-/// `eyekey example document` draws). A job on it can give the known-font attacker the layout
-/// (`options.document_text`).
+/// `eyekey example document` draws). The document keeps its layout (lines, scale, secret alphabet), sealed with it:
+/// jobs on it are judged by the known-font attacker without `options.document_text`.
 #[derive(Debug, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RenderDocument {
@@ -58,6 +58,11 @@ pub struct RenderDocument {
     /// Pixels per font dot (1–64); a character takes 6·scale × 9·scale pixels, and the text must fit.
     #[schema(minimum = 1, maximum = 64)]
     pub scale: u32,
+    /// The secret characters (default the digits): the known-font attacker must tell these apart; the text's
+    /// other characters (a label such as "PIN") are taken as known. A text with none keeps no layout.
+    #[serde(default)]
+    #[schema(max_length = 64)]
+    pub alphabet: Option<String>,
 }
 
 /// One line of a rendered document (the schema of an item of `lines`).
@@ -138,6 +143,22 @@ impl RenderDocument {
         }
         Ok(glyphs::render_text(&lines, self.width, self.height, self.scale))
     }
+
+    /// The layout a job on the rendered document is judged with (None when no character of the text is in the
+    /// alphabet: nothing is secret), or the field that is wrong.
+    fn layout(&self) -> Result<Option<eyekey_core::evaluation::DocumentText>, ApiError> {
+        use eyekey_core::evaluation::{DocumentText, KnownFontAttacker, KnownFontError};
+        let text = DocumentText {
+            lines: self.lines.clone(),
+            scale: self.scale,
+            alphabet: self.alphabet.clone().unwrap_or_else(|| "0123456789".into()),
+        };
+        match KnownFontAttacker::new(&text, self.width, self.height, self.width, self.height) {
+            Ok(_) => Ok(Some(text)),
+            Err(KnownFontError::NothingSecret) => Ok(None),
+            Err(e) => Err(ApiError::invalid("alphabet", e.to_string())),
+        }
+    }
 }
 
 /// An uploaded document's metadata.
@@ -157,6 +178,9 @@ pub struct DocumentView {
     pub width: i64,
     /// Height, pixels.
     pub height: i64,
+    /// Whether it was rendered from text and keeps its layout (sealed): jobs on it are then judged by the
+    /// known-font attacker; on any other document the target must reach the reads threshold of legibility.
+    pub keeps_layout: bool,
     /// Upload time.
     pub created_at: DateTime<Utc>,
 }
@@ -179,6 +203,7 @@ impl From<&DocumentRow> for DocumentView {
             bytes: r.bytes,
             width: r.width,
             height: r.height,
+            keeps_layout: r.sealed_layout.is_some(),
             created_at: to_time(r.created_at),
         }
     }
@@ -255,16 +280,14 @@ pub async fn upload_document(
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(problem)?;
 
-    store_new(
-        &state,
-        &op,
+    let image = NewImage {
         bytes,
-        header.content_type(),
-        header.width,
-        header.height,
-        "document.upload",
-    )
-    .await
+        content_type: header.content_type(),
+        width: header.width,
+        height: header.height,
+        layout: None,
+    };
+    store_new(&state, &op, image, "document.upload").await
 }
 
 /// Render a document from text.
@@ -288,40 +311,56 @@ pub async fn render_document(
     ApiJson(body): ApiJson<RenderDocument>,
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
     let max_pixels = state.config.limits.max_document_pixels;
-    let (png, width, height) = tokio::task::spawn_blocking(move || {
+    let (png, width, height, layout) = tokio::task::spawn_blocking(move || {
         let image = body.render(max_pixels)?;
+        let layout = body
+            .layout()?
+            .map(|l| serde_json::to_vec(&l))
+            .transpose()
+            .map_err(internal)?;
         let (width, height) = image.dimensions();
         let mut png = std::io::Cursor::new(Vec::new());
         image.write_to(&mut png, image::ImageFormat::Png).map_err(internal)?;
-        Ok::<_, ApiError>((png.into_inner(), width, height))
+        Ok::<_, ApiError>((png.into_inner(), width, height, layout))
     })
     .await
     .map_err(internal)??;
-    store_new(
-        &state,
-        &op,
-        Bytes::from(png),
-        "image/png",
+    let image = NewImage {
+        bytes: Bytes::from(png),
+        content_type: "image/png",
         width,
         height,
-        "document.render",
-    )
-    .await
+        layout,
+    };
+    store_new(&state, &op, image, "document.render").await
 }
 
-/// Seals a checked image under a new document id and records it.
+/// A checked image to store, with the layout of one rendered from text (`DocumentText` JSON).
+struct NewImage<'a> {
+    bytes: Bytes,
+    content_type: &'a str,
+    width: u32,
+    height: u32,
+    layout: Option<Vec<u8>>,
+}
+
+/// Seals a checked image (and its layout) under a new document id and records it.
 async fn store_new(
     state: &AppState,
     op: &Operator<scope::Submit>,
-    bytes: Bytes,
-    content_type: &str,
-    width: u32,
-    height: u32,
+    image: NewImage<'_>,
     action: &str,
 ) -> Result<(StatusCode, Json<DocumentView>), ApiError> {
+    let NewImage {
+        bytes,
+        content_type,
+        width,
+        height,
+        layout,
+    } = image;
     let id = id_text(&Uuid::new_v4());
     let len = bytes.len() as i64;
-    let stored = sealed::store_document(&state.objects, &state.master_key, &id, bytes)
+    let stored = sealed::store_document(&state.objects, &state.master_key, &id, bytes, layout)
         .await
         .map_err(ApiError::from_io)?;
     let row = store::documents::insert(
@@ -335,6 +374,7 @@ async fn store_new(
             height: height.into(),
             path: &stored.path,
             data_key: &stored.data_key,
+            sealed_layout: stored.sealed_layout.as_deref(),
         },
     )
     .await?;

@@ -290,10 +290,15 @@ pub async fn create_job(
         return Err(ApiError::invalid("observer_profile_ids", "at most 16 observers"));
     }
     let request_hash = request_hash(&state.master_key, &body, &options)?;
-    let (display, target, observers) = resolve_inputs(&state.db, &body).await?;
-    // The job states the options it runs with: the display's defaults filled in (the decoys' weight), and a
-    // seed drawn for it from the operating system's CSPRNG unless one was given; sealed with the job.
-    let options = options.for_display(&display).with_fresh_seed();
+    let (display, target, observers, layout) = resolve_inputs(&state, &body).await?;
+    // The job states the options it runs with: the display's defaults filled in (the decoys' weight), a seed
+    // drawn for it from the operating system's CSPRNG unless one was given, and the layout of a document rendered
+    // from text as its text hint unless one was given (the known-font attacker then judges it); sealed with the
+    // job.
+    let mut options = options.for_display(&display).with_fresh_seed();
+    if options.document_text.is_none() {
+        options.document_text = layout;
+    }
     let warnings = resolvability_warnings(&Resolvability::of(&display));
     admit(&state.config, &display, &options, observers.len())?;
     let id = JobId::new_v4();
@@ -371,19 +376,27 @@ fn admit(
     ))
 }
 
-/// Checks that every input of a job creation exists; returns the display's geometry, the target profile
-/// and the observers pinned to their current versions.
-async fn resolve_inputs(
-    db: &sqlx::AnyPool,
-    body: &CreateJob,
-) -> Result<(DisplayGeometry, store::profiles::ProfileRow, Vec<ObserverRef>), ApiError> {
+/// What a job creation refers to: the display's geometry, the target profile, the observers pinned to their
+/// current versions, and the layout of a document rendered from text.
+type Inputs = (
+    DisplayGeometry,
+    store::profiles::ProfileRow,
+    Vec<ObserverRef>,
+    Option<eyekey_core::evaluation::DocumentText>,
+);
+
+/// Checks that every input of a job creation exists and returns them.
+async fn resolve_inputs(state: &AppState, body: &CreateJob) -> Result<Inputs, ApiError> {
+    let db = &state.db;
     let display = store::displays::get(db, &id_text(&body.display_id))
         .await?
         .ok_or_else(|| ApiError::invalid("display_id", "no such display"))?;
     let geometry = stored_geometry(&display.geometry)?;
-    store::documents::get(db, &id_text(&body.document_id))
+    let document = store::documents::get(db, &id_text(&body.document_id))
         .await?
         .ok_or_else(|| ApiError::invalid("document_id", "no such document"))?;
+    let layout = sealed::document_layout(&state.master_key, &document)
+        .map_err(|e| ApiError::Internal(e.context("the document's layout")))?;
     if let Some(decoy) = &body.decoy_document_id {
         store::documents::get(db, &id_text(decoy))
             .await?
@@ -402,7 +415,7 @@ async fn resolve_inputs(
             version: p.current_version,
         });
     }
-    Ok((geometry, target, observers))
+    Ok((geometry, target, observers, layout))
 }
 
 /// Enqueues a job, or finds the one this idempotency key already created: `201` and the new job (audited,

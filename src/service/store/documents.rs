@@ -24,11 +24,13 @@ pub struct DocumentRow {
     /// The data key the file is sealed under, wrapped by the master key; `None` for a document stored
     /// before sealing (sealed at start) or deleted.
     pub data_key: Option<Vec<u8>>,
+    /// For a document rendered from text: its layout (`DocumentText` JSON) sealed under its data key.
+    pub sealed_layout: Option<Vec<u8>>,
     /// Upload time.
     pub created_at: i64,
 }
 
-const COLUMNS: &str = "id, content_mac, content_type, bytes, width, height, path, data_key, created_at";
+const COLUMNS: &str = "id, content_mac, content_type, bytes, width, height, path, data_key, sealed_layout, created_at";
 
 /// A new document's metadata.
 #[derive(Clone, Debug)]
@@ -49,14 +51,16 @@ pub struct NewDocument<'a> {
     pub path: &'a str,
     /// Wrapped data key.
     pub data_key: &'a [u8],
+    /// The layout of a document rendered from text, sealed under the data key.
+    pub sealed_layout: Option<&'a [u8]>,
 }
 
 /// Records an uploaded document whose sealed file is already in place.
 pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow, sqlx::Error> {
     let pool = &writer.0;
     sqlx::query_as::<_, DocumentRow>(&format!(
-        "INSERT INTO documents (id, content_mac, content_type, bytes, width, height, path, data_key, created_at)
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING {COLUMNS}"
+        "INSERT INTO documents (id, content_mac, content_type, bytes, width, height, path, data_key, sealed_layout, created_at)
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10) RETURNING {COLUMNS}"
     ))
     .bind(d.id)
     .bind(d.content_mac)
@@ -66,6 +70,7 @@ pub async fn insert(writer: &Writer, d: &NewDocument<'_>) -> Result<DocumentRow,
     .bind(d.height)
     .bind(d.path)
     .bind(d.data_key)
+    .bind(d.sealed_layout)
     .bind(now_ms())
     .fetch_one(pool)
     .await
@@ -146,7 +151,7 @@ pub async fn delete(writer: &Writer, which: Which<'_>, now: i64) -> Result<Optio
     }
     let mut left = Leftovers::default();
     for (id, path) in doomed {
-        sqlx::query("UPDATE documents SET deleted_at = $1, data_key = NULL WHERE id = $2")
+        sqlx::query("UPDATE documents SET deleted_at = $1, data_key = NULL, sealed_layout = NULL WHERE id = $2")
             .bind(now)
             .bind(&id)
             .execute(&mut *tx)

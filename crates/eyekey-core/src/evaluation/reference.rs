@@ -158,7 +158,7 @@ mod tests {
         assert!(reference.target_reading(&score(READS_THRESHOLD, None), 0.0).reads);
         assert_eq!(
             reference.target_reading(&score(0.30, None), 0.0).describe(),
-            "does not read it (no text hint: legibility 0.30, read from 0.70)"
+            "does not read it (no text hint: legibility 0.30, read from 0.80)"
         );
         // With one: the known-font attacker decides, whatever the legibility, with the margin asked.
         let r = reference.target_reading(&score(0.2, Some(read(true, 0.03))), 0.02);
