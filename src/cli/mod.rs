@@ -1095,3 +1095,105 @@ fn print_stdout(text: &str) -> Result<()> {
         other => Ok(other?),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_args(args: &[&str]) -> Result<()> {
+        run(Cli::try_parse_from(
+            std::iter::once("eyekey").chain(args.iter().copied()),
+        )?)
+    }
+
+    /// The README's offline example, as the README runs it but for 120 solver iterations instead of 300 and with a
+    /// fixed seed (the README's draws a fresh one, as every encode does): the
+    /// target must read the frames `encode` writes, by the judge without the text (legibility at the reads bar)
+    /// and by the known-font attacker with it, and `evaluate` must say so.
+    #[test]
+    fn the_readmes_offline_example_gives_frames_its_target_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = |name: &str| dir.path().join(name).display().to_string();
+        std::fs::write(
+            path("display.json"),
+            serde_json::to_vec(&DisplayGeometry::preset("lenslet").unwrap()).unwrap(),
+        )
+        .unwrap();
+        let me = eyekey_core::physics::population::sample_population(1, 11, Default::default()).remove(0);
+        std::fs::write(path("me.json"), serde_json::to_vec(&me).unwrap()).unwrap();
+        run_args(&[
+            "example",
+            "document",
+            "--text",
+            "PIN",
+            "--text",
+            "4821",
+            "--width",
+            "192",
+            "--height",
+            "192",
+            "--scale",
+            "6",
+            "--out",
+            &path("pin.png"),
+        ])
+        .unwrap();
+        let (display, me_json, pin, bundle) = (path("display.json"), path("me.json"), path("pin.png"), path("bundle"));
+        run_args(&[
+            "encode",
+            "--display",
+            &display,
+            "--target",
+            &me_json,
+            "--document",
+            &pin,
+            "--population-decoys",
+            "12",
+            "--decoy-weight",
+            "0.2",
+            "--adaptive-rounds",
+            "2",
+            "--camera-decoys",
+            "--max-iterations",
+            "120",
+            "--seed",
+            "7",
+            "--out",
+            &bundle,
+        ])
+        .expect("the target reads, or encode fails with target_cannot_read");
+        let record: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("bundle/encoding.json")).unwrap()).unwrap();
+        let reading = &record["solver"]["target_reading"];
+        assert_eq!(reading["judge"], "legibility", "{reading}");
+        assert_eq!(reading["reads"], true, "{reading}");
+        for (out, hint) in [("plain", false), ("hinted", true)] {
+            let out = path(out);
+            let mut args = vec![
+                "evaluate",
+                "--bundle",
+                &bundle,
+                "--target",
+                &me_json,
+                "--document",
+                &pin,
+                "--population",
+                "0",
+                "--out",
+                &out,
+            ];
+            if hint {
+                args.extend(["--text", "PIN", "--text", "4821", "--text-scale", "6"]);
+            }
+            run_args(&args).unwrap();
+            let report: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(format!("{out}/report.json")).unwrap()).unwrap();
+            let t = &report["target_reading"];
+            assert_eq!(t["reads"], true, "{out}: {t}");
+            assert_eq!(t["judge"], if hint { "known_font" } else { "legibility" }, "{t}");
+            if hint {
+                assert_eq!(report["target"]["known_font"]["text"], "4821", "{report}");
+            }
+        }
+    }
+}

@@ -4,7 +4,7 @@ use std::io::Read as _;
 use std::time::Duration;
 
 use reqwest::StatusCode;
-use serde_json::json;
+use serde_json::{json, Value};
 use sha2::{Digest as _, Sha256};
 
 use crate::helpers::{expect_json, job_body, read_events, spawn_app_with, TestApp, OPERATOR_TOKEN};
@@ -220,4 +220,89 @@ async fn fifty_jobs_submitted_at_once_all_finish() {
         .await
         .unwrap();
     assert!(metrics.contains("eyekey_solve_duration_seconds_bucket"), "{metrics}");
+}
+
+/// The walkthrough's job (`examples/walkthrough.sh`): the `lenslet` preset, the example target and representative
+/// observer, the uploaded PIN slip (no text hint), default options but for a fixed seed. The job succeeds only if
+/// its target reads, by the reads bar of legibility; the evaluation says it reads, and the known-font attacker,
+/// told the slip's text, reads the target's view of the downloaded frames too.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_walkthroughs_job_gives_frames_its_target_reads() {
+    let app = crate::helpers::spawn_app_with(|c| c.workers = 1).await;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let profile = |name: &str| -> Value {
+        serde_json::from_slice(&std::fs::read(root.join("examples/profiles").join(name)).unwrap()).unwrap()
+    };
+    let enrol = |label: &str, p: Value| {
+        let app = &app;
+        let body = json!({ "label": label, "profile": p });
+        async move { expect_json(app.op_post("/v1/profiles", &body).await, StatusCode::CREATED).await["id"].clone() }
+    };
+    let target = enrol("target", profile("target.json")).await;
+    let representative = enrol("representative", profile("representative.json")).await;
+    let display = expect_json(
+        app.op_post("/v1/displays", &json!({ "name": "walkthrough", "preset": "lenslet" }))
+            .await,
+        StatusCode::CREATED,
+    )
+    .await;
+    let slip = std::fs::read(root.join("examples/documents/pin_slip.png")).unwrap();
+    let document = app.upload(slip.clone()).await;
+    let body = json!({
+        "display_id": display["display"]["id"], "document_id": document, "profile_id": target,
+        "observer_profile_ids": [representative], "options": { "evaluation_population": 5, "seed": 1 },
+    });
+    let id = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let job = app.wait_for_terminal(&id, Duration::from_secs(300)).await;
+    assert_eq!(job["state"], "succeeded", "{job}");
+    let report = expect_json(app.op_get(&format!("/v1/jobs/{id}/evaluation")).await, StatusCode::OK).await;
+    let reading = &report["target_reading"];
+    assert_eq!(
+        (&reading["judge"], &reading["reads"]),
+        (&json!("legibility"), &json!(true)),
+        "{reading}"
+    );
+    assert!(reading["score"].as_f64().unwrap() >= eyekey_core::evaluation::READS_THRESHOLD);
+
+    // The known-font attacker, told the slip's text, reads what the target sees of the frames the display gets.
+    let token = display["token"].as_str().unwrap();
+    let r = app
+        .display_get(token, &format!("/v1/frames/jobs/{id}/bundle.zip"))
+        .await;
+    assert_eq!(r.status(), StatusCode::OK);
+    let zip_path = app.data_dir.join("walkthrough.zip");
+    std::fs::write(&zip_path, r.bytes().await.unwrap()).unwrap();
+    let (manifest, light_field) = eyekey_core::bundle::read_bundle(&zip_path).unwrap();
+    let document = image::load_from_memory(&slip).unwrap().to_rgb8();
+    let hint = eyekey_core::evaluation::DocumentText {
+        lines: vec!["PIN".into(), "****".into()],
+        scale: 7,
+        alphabet: "0123456789".into(),
+    }
+    .resolve(&document)
+    .expect("the example slip is drawn in eyekey's font at 7 px per dot (examples/README.md)");
+    let me: eyekey_core::physics::profile::VisionProfile = serde_json::from_value(profile("target.json")).unwrap();
+    let observer = eyekey_core::physics::observer::Observer::new(
+        &manifest.display,
+        &me,
+        eyekey_core::physics::transport::EyePosition::default(),
+        &eyekey_core::physics::transport::TransportOptions::default(),
+        eyekey_core::physics::observer::Optics::Wave,
+        &eyekey_core::physics::transport::TransportCache::disabled(),
+    )
+    .unwrap();
+    let grid = observer.grid();
+    let attacker = eyekey_core::evaluation::KnownFontAttacker::new(
+        &hint,
+        document.width(),
+        document.height(),
+        grid.width,
+        grid.height,
+    )
+    .unwrap();
+    let read = attacker.read(&eyekey_core::evaluation::luminance(&observer.view(&light_field)));
+    assert!(read.correct, "the target's view of the delivered frames reads {read:?}");
 }
