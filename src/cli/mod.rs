@@ -389,6 +389,10 @@ pub struct EncodeArgs {
     /// The document's text, font scale and secret alphabet, where it was drawn by eyekey.
     #[command(flatten)]
     pub hint: TextHintArgs,
+    /// Instead of the default: a focus state the target must read in too, dioptres added to its sphere
+    /// (repeatable; `target_focus_d`).
+    #[arg(long, allow_hyphen_values = true)]
+    pub target_focus: Vec<f64>,
     /// Encoder.
     #[arg(long, value_enum, default_value = "multiplex")]
     pub method: Method,
@@ -919,6 +923,11 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         camera_decoys: a.camera_decoys || d.camera_decoys,
         camera_decoy_ring_mm: a.camera_decoy_ring.unwrap_or(d.camera_decoy_ring_mm),
         document_text: a.hint.hint(),
+        target_focus_d: if a.target_focus.is_empty() {
+            d.target_focus_d.clone()
+        } else {
+            a.target_focus.clone()
+        },
         ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {

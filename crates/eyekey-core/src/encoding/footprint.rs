@@ -77,11 +77,13 @@ pub struct Footprint {
 
 /// The observers the encoder renders for `options` with `extra_observers` representative observers.
 pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, extra_observers: usize) -> u64 {
-    let target = 1 + if options.head_radius_mm > 0.0 {
-        u64::from(options.head_positions)
-    } else {
-        0
-    };
+    let target = 1
+        + options.target_focus_d.len() as u64
+        + if options.head_radius_mm > 0.0 {
+            u64::from(options.head_positions)
+        } else {
+            0
+        };
     let cameras = if options.camera_decoys {
         let positions = super::pipeline::camera_decoy_positions(options).len() as u64;
         let apertures = super::pipeline::camera_decoy_apertures(options).len() as u64;

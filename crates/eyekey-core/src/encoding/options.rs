@@ -183,6 +183,13 @@ pub struct EncodeOptions {
     /// §2c).
     #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 4.0))]
     pub head_round_max_weight: f64,
+    /// Focus states the target must read in too, dioptres added to its profile's sphere (an eye's accommodation
+    /// drifts by about ±0.25 D while it looks): each is a stacked target term, shown the document at
+    /// `target_focus_weight`, and the target guard asks the target to read in each (docs/design.md §3.1).
+    pub target_focus_d: Vec<f64>,
+    /// The weight of each focus state's term, relative to the profile's own focus (1).
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 4.0))]
+    pub target_focus_weight: f64,
     /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
     /// focus and aperture of [`BystanderOptions::default`](crate::evaluation::BystanderOptions), behind the
     /// sensor's R, G and B and behind each band's filter) looks from `bystander_scan_mm` to the right, left,
@@ -269,6 +276,8 @@ impl Default for EncodeOptions {
             camera_decoy_ring_mm: 0.0,
             head_rounds: 0,
             head_round_max_weight: HEAD_ROUND_MAX_WEIGHT,
+            target_focus_d: Vec::new(),
+            target_focus_weight: DEFAULT_TARGET_FOCUS_WEIGHT,
             bystander_rounds: 0,
             bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
             bystander_decoys_per_round: 8,
@@ -338,6 +347,9 @@ pub const HEAD_ROUND_POSITIONS: u32 = 20;
 /// attacker's margin (the true glyph's smallest lead over the best other, negative when a character is misread)
 /// at least minus this.
 pub const BYSTANDER_NEAR_MARGIN: f64 = 0.02;
+
+/// Each focus state's weight by default (`target_focus_weight`).
+pub const DEFAULT_TARGET_FOCUS_WEIGHT: f64 = 0.5;
 
 /// Each head-movement position's weight by default: a quarter of the design position's.
 pub const DEFAULT_HEAD_WEIGHT: f64 = 0.25;
@@ -435,6 +447,18 @@ impl EncodeOptions {
             return bad(
                 "camera_decoy_ring_mm",
                 format!("must be within 0..=20 mm, got {}", self.camera_decoy_ring_mm),
+            );
+        }
+        if self.target_focus_d.len() > 4 || self.target_focus_d.iter().any(|d| !(d.is_finite() && d.abs() <= 2.0)) {
+            return bad(
+                "target_focus_d",
+                format!("at most 4 focus states within ±2 D, got {:?}", self.target_focus_d),
+            );
+        }
+        if !(self.target_focus_weight.is_finite() && (0.0..=4.0).contains(&self.target_focus_weight)) {
+            return bad(
+                "target_focus_weight",
+                format!("must be within 0..=4, got {}", self.target_focus_weight),
             );
         }
         if !(self.target_margin.is_finite() && (0.0..=0.5).contains(&self.target_margin)) {

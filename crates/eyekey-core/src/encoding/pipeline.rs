@@ -528,7 +528,7 @@ fn encode_draw(
     }
     progress(0.85);
     summary.target_reading = Some(cast.worse_target_reading(&reference, &l, o.target_margin));
-    summary.observers = cast.others.len() + 1 + cast.moved.len();
+    summary.observers = cast.others.len() + 1 + cast.moved.len() + cast.focused.len();
     summary.unknowns = l.len();
     Ok(Encoded {
         light_field: l,
@@ -746,6 +746,9 @@ struct Cast {
     /// ‖S'_t‖², the scale of the data term.
     energy: f64,
     moved: Vec<Observer>,
+    /// The target at each of its focus states (`target_focus_d`), each a term at `target_focus_weight`, and a
+    /// look the guard judges.
+    focused: Vec<Observer>,
     /// Each of `moved`'s weight: `head_weight`, raised by head-box rounds where the tracked eye still misreads.
     moved_weights: Vec<f64>,
     /// The tracked eye positions head-box rounds added (`head_rounds`), the last of `moved`.
@@ -769,22 +772,28 @@ impl Cast {
     /// The target's reading of `l` through its own operator and the check's, whichever is further from reading
     /// (the lower score past the bar).
     fn worse_target_reading(&self, reference: &Reference, l: &[f32], margin: f64) -> crate::evaluation::TargetReading {
-        let [own, check] = [&self.target, &self.check]
-            .map(|o| reference.target_reading(&reference.score_observer("target", o, l).0, margin));
-        match (own.reads, check.reads) {
-            (true, false) => check,
-            (false, true) => own,
-            _ if check.margin() < own.margin() => check,
-            _ => own,
-        }
+        [&self.target, &self.check]
+            .into_iter()
+            .chain(&self.focused)
+            .map(|o| reference.target_reading(&reference.score_observer("target", o, l).0, margin))
+            .min_by(|a, b| {
+                (a.reads, a.margin())
+                    .partial_cmp(&(b.reads, b.margin()))
+                    .unwrap_or(std::cmp::Ordering::Equal)
+            })
+            .expect("the target's own look")
     }
 
     /// How the target reads `l` by `reference` through its own operator and the check's: whether both looks
     /// read it, and the smaller of their known-font margins (None where the text is not known).
     fn target_reading(&self, reference: &Reference, l: &[f32]) -> (bool, Option<f64>) {
-        let scores = [&self.target, &self.check].map(|o| reference.score_observer("target", o, l).0);
+        let scores: Vec<crate::evaluation::ViewScore> = [&self.target, &self.check]
+            .into_iter()
+            .chain(&self.focused)
+            .map(|o| reference.score_observer("target", o, l).0)
+            .collect();
         // The target's bar (every secret character right, or the reads threshold without a text hint), not the
-        // "might read" one everybody else is held under.
+        // "might read" one everybody else is held under; in its own focus and in each focus state asked.
         let readable = scores.iter().all(|s| reference.target_reading(s, 0.0).reads);
         let margins: Option<Vec<f64>> = scores.iter().map(|s| s.known_font.as_ref().map(|k| k.margin)).collect();
         (readable, margins.map(|m| m.into_iter().fold(f64::INFINITY, f64::min)))
@@ -823,7 +832,13 @@ impl Cast {
             LeakPatterns::new(&spec.document, g.width, g.height, glyphs)
         });
         let moved = head_box_observers(spec, cache)?;
+        let focused = o
+            .target_focus_d
+            .iter()
+            .map(|&dd| look_at_focus(spec, dd, &base_transport(o), cache))
+            .collect::<Result<Vec<_>, _>>()?;
         let mut cast = Self {
+            focused,
             leak,
             attacker,
             moved_weights: vec![o.head_weight; moved.len()],
@@ -1272,6 +1287,33 @@ fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
 
 /// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
 /// is asked for the document with weight `head_weight` (a quarter of the central weight by default).
+/// The target at the design position with `dd` dioptres added to its profile's sphere (a focus state,
+/// `target_focus_d`).
+fn look_at_focus(
+    spec: &JobSpec,
+    dd: f64,
+    topts: &TransportOptions,
+    cache: &TransportCache,
+) -> Result<Observer, PipelineError> {
+    let mut person = spec.target.clone();
+    let mut p = person.prescription.unwrap_or(crate::physics::zernike::Prescription {
+        sphere_d: 0.0,
+        cylinder_d: 0.0,
+        axis_deg: 0.0,
+    });
+    p.sphere_d += dd;
+    person.prescription = Some(p);
+    Observer::new(
+        &spec.display,
+        &person,
+        EyePosition::default(),
+        topts,
+        spec.options.optics,
+        cache,
+    )
+    .map_err(|e| observer_error("target profile", e))
+}
+
 fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let r = spec.options.head_radius_mm;
     if r <= 0.0 {
@@ -1390,6 +1432,14 @@ fn solve_round(
         weight: 1.0,
         leak: None,
     }];
+    for f in &cast.focused {
+        terms.push(Term {
+            observer: f,
+            objective: cast.target_objective.clone(),
+            weight: o.target_focus_weight,
+            leak: None,
+        });
+    }
     for (m, &weight) in cast.moved.iter().zip(&cast.moved_weights) {
         terms.push(Term {
             observer: m,
@@ -1822,6 +1872,42 @@ mod tests {
         };
         spec.document = crate::imaging::glyphs::render_text(&["PIN", "4821"], 128, 128, 4);
         spec
+    }
+
+    #[test]
+    fn a_focus_state_is_a_target_term_the_guard_judges_too() {
+        // The perfect eye refocused by +1 D sees the plain solve's PIN blurred (legibility 0.91); asked to read in
+        // that focus state too, the solve pre-compensates for it (1.00), and the encode counts one more observer.
+        let cache = TransportCache::default();
+        let cancel = AtomicBool::new(false);
+        let mut spec = pin_job_on_lenslets();
+        spec.options.max_iterations = 60;
+        spec.options.optics = crate::physics::observer::Optics::Wave;
+        let plain = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        spec.options.target_focus_d = vec![1.0];
+        spec.options.target_focus_weight = 1.0;
+        let focused = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
+        assert_eq!(focused.solver.observers, plain.solver.observers + 1);
+        let refocused = look_at_focus(&spec, 1.0, &base_transport(&spec.options), &cache).unwrap();
+        let g = refocused.grid();
+        let (w, h) = spec.document.dimensions();
+        let attacker = crate::evaluation::KnownFontAttacker::new(&pin_hint(), w, h, g.width, g.height).unwrap();
+        let reference = Reference::new(&spec.document, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD)
+            .with_known_font(attacker);
+        let legibility = |l: &[f32]| reference.score_observer("refocused", &refocused, l).0.legibility;
+        let (before, after) = (legibility(&plain.light_field), legibility(&focused.light_field));
+        assert!(
+            after > before + 0.02,
+            "refocused by +1 D: {before:.3} without the focus state, {after:.3} with it"
+        );
+        // The summary's reading is the worst of the looks, the focus state's included.
+        let reading = focused.solver.target_reading.unwrap();
+        let refocused_reading =
+            reference.target_reading(&reference.score_observer("t", &refocused, &focused.light_field).0, 0.0);
+        assert!(
+            reading.margin() <= refocused_reading.margin() + 1e-12,
+            "{reading:?} vs {refocused_reading:?}"
+        );
     }
 
     #[test]
