@@ -213,6 +213,13 @@ pub enum ExperimentCommand {
         /// The decoys look through the target's pupil (`decoys_at_target_pupil`).
         #[arg(long)]
         decoys_at_target_pupil: bool,
+        /// Encode each slip as an uploaded image, without its text hint (the evaluation still reads it with the
+        /// known-font attacker).
+        #[arg(long)]
+        no_hint: bool,
+        /// Instead of the default: focus states the target must read in too (repeatable; `target_focus_d`).
+        #[arg(long, allow_hyphen_values = true)]
+        target_focus: Vec<f64>,
         /// Instead of the default: population decoys.
         #[arg(long)]
         decoys: Option<u32>,
@@ -733,6 +740,8 @@ pub fn run(cli: Cli) -> Result<()> {
             target_looks,
             preset,
             decoys_at_target_pupil,
+            no_hint,
+            target_focus,
             decoys,
             decoy_weight,
             leak_weight,
@@ -753,11 +762,16 @@ pub fn run(cli: Cli) -> Result<()> {
                 target_margin: target_margin.unwrap_or(d.target_margin),
                 adaptive_rounds: adaptive_rounds.unwrap_or(d.adaptive_rounds),
                 seed: Some(seed.unwrap_or(crate::research::EXPERIMENT_SEED)),
+                target_focus_d: if target_focus.is_empty() {
+                    d.target_focus_d.clone()
+                } else {
+                    target_focus
+                },
                 ..d
             };
             print!(
                 "{}",
-                crate::research::defaults::run(&out, targets, population, target_looks, &preset, options)?
+                crate::research::defaults::run(&out, targets, population, target_looks, &preset, options, !no_hint)?
             );
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {

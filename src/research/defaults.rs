@@ -1,8 +1,9 @@
 //! `eyekey experiment defaults`: does every preset's default encode serve its target? For each display preset,
 //! held-out targets (people sampled with seeds no encoder or evaluation uses, at their own pupils) each get a PIN
 //! slip of their own digits, encoded with the default options (`EncodeOptions::default()`) and the slip's text
-//! hint; the known-font attacker judges the target's view, and held-out people at the target's
-//! position say who else reads.
+//! hint (or, with `--no-hint`, as an uploaded image: the encoder then holds the target to the reads bar of
+//! legibility); the known-font attacker judges the target's view, and held-out people at the target's
+//! position say who else reads. A target whose encode fails (`target_cannot_read`) is a row of its own.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -23,7 +24,8 @@ use eyekey_core::physics::transport::TransportCache;
 /// Runs `targets` held-out targets on every preset (or those named in `only`), each encoded with `options` (the
 /// defaults, or variants of them) and judged with `population` held-out people; the target's view is also
 /// drawn with `target_looks` further evaluation seeds (the kernels' sampling noise), each read by the known-font
-/// attacker. Writes `out/defaults.md`; returns it.
+/// attacker. Without `hint` the encoder is not told the slip's text (the evaluation still is). Writes
+/// `out/defaults.md`; returns it.
 pub fn run(
     out: &Path,
     targets: u32,
@@ -31,6 +33,7 @@ pub fn run(
     target_looks: u32,
     only: &[String],
     options: EncodeOptions,
+    hint: bool,
 ) -> Result<String> {
     options.validate().map_err(|e| anyhow::anyhow!("encode options: {e}"))?;
     std::fs::create_dir_all(out)?;
@@ -70,12 +73,25 @@ pub fn run(
                 document: document.clone(),
                 decoy: None,
                 options: EncodeOptions {
-                    document_text: Some(text.clone()),
+                    document_text: hint.then(|| text.clone()),
                     ..options.clone()
                 },
             };
             let t = Instant::now();
-            let enc = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+            let enc = match encode(&spec, &cache, &|_| {}, &AtomicBool::new(false)) {
+                Ok(enc) => enc,
+                Err(e @ eyekey_core::encoding::pipeline::PipelineError::TargetCannotRead { .. }) => {
+                    writeln!(
+                        md,
+                        "| `{name}` | {k} ({:.1} mm) | {digits} | {:.0} s | **{e}** | | | | | | |",
+                        target.pupil_diameter_mm,
+                        t.elapsed().as_secs_f64()
+                    )?;
+                    eprintln!("{}", md.lines().last().unwrap_or(""));
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            };
             let t_encode = t.elapsed().as_secs_f64();
             let eval_options = EvaluationOptions {
                 optics: options.optics,
