@@ -46,6 +46,7 @@ pub fn run(
         "target: legibility, known font",
         "target read under other evaluation seeds (worst legibility, worst known-font margin)",
         "target with 8× the sub-rays: legibility, known font",
+        "target refocused: legibility, known-font margin",
         "held-out people who read",
         "their pupils",
         "wavefront difference from the target's (RMS, orders ≥ 2): readers' median, everyone's median",
@@ -83,7 +84,7 @@ pub fn run(
                 Err(e @ eyekey_core::encoding::pipeline::PipelineError::TargetCannotRead { .. }) => {
                     writeln!(
                         md,
-                        "| `{name}` | {k} ({:.1} mm) | {digits} | {:.0} s | **{e}** | | | | | | |",
+                        "| `{name}` | {k} ({:.1} mm) | {digits} | {:.0} s | **{e}** | | | | | | | |",
                         target.pupil_diameter_mm,
                         t.elapsed().as_secs_f64()
                     )?;
@@ -97,14 +98,24 @@ pub fn run(
                 optics: options.optics,
                 ..EvaluationOptions::population_only(population, Some(text))
             };
-            // The encoded light field as the evaluation sees it, with `options`.
-            let judge = |options: &EvaluationOptions| {
+            // The encoded light field as the evaluation sees it, with `options`, the target refocused by `dd`.
+            let judge_at = |options: &EvaluationOptions, dd: f64| {
+                let mut person = target.clone();
+                if dd != 0.0 {
+                    let mut p = person.prescription.unwrap_or(eyekey_core::physics::zernike::Prescription {
+                        sphere_d: 0.0,
+                        cylinder_d: 0.0,
+                        axis_deg: 0.0,
+                    });
+                    p.sphere_d += dd;
+                    person.prescription = Some(p);
+                }
                 evaluate(
                     &display,
                     &enc.light_field,
                     &document,
                     OBJECTIVE_LEVEL,
-                    &target,
+                    &person,
                     &[],
                     options,
                     &cache,
@@ -112,6 +123,7 @@ pub fn run(
                     &AtomicBool::new(false),
                 )
             };
+            let judge = |options: &EvaluationOptions| judge_at(options, 0.0);
             let ev = judge(&eval_options)?;
             // The target's view alone, its kernels drawn with `seed` and `sub_rays`.
             let target_view = |seed: u64, sub_rays: u32| {
@@ -135,6 +147,27 @@ pub fn run(
             }
             // And once with 8 times the evaluation's sub-rays: kernels near their expectation, which is what a
             // real eye sees.
+            // Refocused by ±0.25 D (accommodation's drift while one looks), judged by the known-font attacker.
+            let mut refocused = Vec::new();
+            for dd in [-0.25, 0.25] {
+                let t = judge_at(
+                    &EvaluationOptions {
+                        optics: eval_options.optics,
+                        ..EvaluationOptions::population_only(0, eval_options.document_text.clone())
+                    },
+                    dd,
+                )?
+                .report
+                .target;
+                refocused.push(format!(
+                    "{:+.2} D: {:.2}, {}{}",
+                    dd,
+                    t.legibility,
+                    t.known_font.as_ref().map_or("–".into(), |k| format!("{:+.3}", k.margin)),
+                    if t.readable { "" } else { " **not read**" }
+                ));
+            }
+            let refocused = refocused.join("; ");
             let converged = target_view(eval_options.seed, 8 * eval_options.sub_rays)?;
             let converged = format!(
                 "{:.2}, {}{}",
@@ -189,7 +222,7 @@ pub fn run(
             };
             writeln!(
                 md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} × {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {} of {} | {readers} | {distance} |",
+                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} × {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {refocused} | {} of {} | {readers} | {distance} |",
                 target.pupil_diameter_mm,
                 options.decoy_weight_on(&display),
                 enc.solver.decoy_weight_scale,
