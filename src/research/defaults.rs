@@ -102,11 +102,13 @@ pub fn run(
             let judge_at = |options: &EvaluationOptions, dd: f64| {
                 let mut person = target.clone();
                 if dd != 0.0 {
-                    let mut p = person.prescription.unwrap_or(eyekey_core::physics::zernike::Prescription {
-                        sphere_d: 0.0,
-                        cylinder_d: 0.0,
-                        axis_deg: 0.0,
-                    });
+                    let mut p = person
+                        .prescription
+                        .unwrap_or(eyekey_core::physics::zernike::Prescription {
+                            sphere_d: 0.0,
+                            cylinder_d: 0.0,
+                            axis_deg: 0.0,
+                        });
                     p.sphere_d += dd;
                     person.prescription = Some(p);
                 }
@@ -163,7 +165,9 @@ pub fn run(
                     "{:+.2} D: {:.2}, {}{}",
                     dd,
                     t.legibility,
-                    t.known_font.as_ref().map_or("–".into(), |k| format!("{:+.3}", k.margin)),
+                    t.known_font
+                        .as_ref()
+                        .map_or("–".into(), |k| format!("{:+.3}", k.margin)),
                     if t.readable { "" } else { " **not read**" }
                 ));
             }
