@@ -64,16 +64,13 @@ pub async fn get_evaluation(
     _op: Operator<scope::ReadEvaluation>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
-    let job = succeeded(&state, &id).await?;
-    send_sealed(
-        &state,
-        &job,
-        "report.json",
-        "application/json",
-        None,
-        "evaluation report",
-    )
-    .await
+    send_json_output(&state, &id, "report.json", "evaluation report").await
+}
+
+/// One of a succeeded job's operator-only JSON outputs (`report.json`, `encoding.json`), opened.
+async fn send_json_output(state: &AppState, id: &Uuid, name: &str, what: &'static str) -> Result<Response, ApiError> {
+    let job = succeeded(state, id).await?;
+    send_sealed(state, &job, name, "application/json", None, what).await
 }
 
 /// How the job's frames were encoded (`encoding.json`): the options as run, with the seed the encode drew its
@@ -95,13 +92,10 @@ pub async fn get_encoding(
     _op: Operator<scope::ReadEvaluation>,
     ApiPath(id): ApiPath<Uuid>,
 ) -> Result<Response, ApiError> {
-    let job = succeeded(&state, &id).await?;
-    send_sealed(
+    send_json_output(
         &state,
-        &job,
+        &id,
         eyekey_core::encoding::pipeline::ENCODING_FILE,
-        "application/json",
-        None,
         "encoding record",
     )
     .await
