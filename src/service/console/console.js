@@ -950,7 +950,7 @@ async function showEvaluation(job, results, labels) {
     p ? h("section", {}, h("h2", {}, "Who else can read it"),
       h("p", { id: "population-summary" }, `${p.readable_count} of ${p.count} sampled people read it (${fmt(100 * p.readable_fraction, 1)} %, 95 % interval ${fmt(100 * p.readable_ci95[0], 1)}–${fmt(100 * p.readable_ci95[1], 1)} %); ${typeof p.known_font_readers === "number" ? ` the known-font attacker read it for ${p.known_font_readers};` : ""} median legibility ${fmt(p.median_legibility)}, 95th percentile ${fmt(p.p95_legibility)}, highest ${fmt(p.max_legibility)}. ${report.target.known_font
         ? "A viewer reads it when the known-font attacker reads every secret character from their view; legibility is shown for reference."
-        : `A viewer reads it at legibility ≥ ${fmt(report.threshold)} (the job gave no text hint, so the known-font attacker did not run).`}`),
+        : `Somebody might read it from legibility ${fmt(report.threshold)} (the job gave no text hint, so the known-font attacker did not run); the target must reach ${report.target_reading ? fmt(report.target_reading.bar) : "—"} to read it.`}`),
       populationPlot(people, report.threshold, report.target.legibility)) : null,
     h("section", {}, h("h2", {}, "The attackers' verdicts"),
       h("table", { id: "verdicts" },
