@@ -166,7 +166,6 @@ pub fn seal_to_file(path: &Path, key: &DataKey, aad: &[u8], plain: &[u8]) -> std
 /// encoder's seed. Either gives away what the frames hide: the text is the secret itself, and the seed is the
 /// decoys' noise, which an attacker who knew it could subtract.
 #[derive(serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
 struct SecretOptions {
     #[serde(default)]
     document_text: Option<eyekey_core::evaluation::DocumentText>,
@@ -198,12 +197,14 @@ pub fn split_options(options: &EncodeOptions) -> serde_json::Result<(String, Opt
 pub fn join_options(clear: &str, secret: Option<&[u8]>) -> serde_json::Result<EncodeOptions> {
     let mut options: EncodeOptions = serde_json::from_str(clear)?;
     if let Some(secret) = secret {
-        match serde_json::from_slice::<SecretOptions>(secret) {
-            Ok(s) => {
-                options.document_text = s.document_text;
-                options.seed = s.seed.or(options.seed);
-            }
-            Err(_) => options.document_text = Some(serde_json::from_slice(secret)?),
+        let value: serde_json::Value = serde_json::from_slice(secret)?;
+        if value.get("lines").is_some() {
+            // A bare text hint, as sealed before the seed was.
+            options.document_text = Some(serde_json::from_value(value)?);
+        } else {
+            let s: SecretOptions = serde_json::from_value(value)?;
+            options.document_text = s.document_text;
+            options.seed = s.seed.or(options.seed);
         }
     }
     Ok(options)

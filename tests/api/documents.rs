@@ -279,20 +279,31 @@ async fn a_document_rendered_from_text_keeps_its_layout_sealed_and_jobs_on_it_ar
     let doc = expect_json(app.op_post("/v1/documents/text", &body).await, StatusCode::CREATED).await;
     assert_eq!(doc["keeps_layout"], true, "{doc}");
     let id = doc["id"].as_str().unwrap();
-    // The job gives no hint: it takes the document's own, and states it to the operator.
+    // The job gives no hint: it takes the document's own, its digits masked (read from the document when the job
+    // runs), so the PIN is not in the job's view.
     let mut job = crate::helpers::job_body(&f);
     job["document_id"] = serde_json::json!(id);
     let created = expect_json(app.op_post("/v1/jobs", &job).await, StatusCode::CREATED).await;
     assert_eq!(
         created["options"]["document_text"],
-        serde_json::json!({ "lines": ["PIN", "4821"], "scale": 2, "alphabet": "0123456789" }),
+        serde_json::json!({ "lines": ["PIN", "****"], "scale": 2, "alphabet": "0123456789" }),
         "{created}"
     );
+    assert!(!created.to_string().contains("4821"), "{created}");
     // A hint the operator gives wins.
     job["options"]["document_text"] =
-        serde_json::json!({ "lines": ["PIN", "****"], "scale": 2, "alphabet": "0123456789" });
+        serde_json::json!({ "lines": ["PIN", "48**"], "scale": 2, "alphabet": "0123456789" });
     let given = expect_json(app.op_post("/v1/jobs", &job).await, StatusCode::CREATED).await;
-    assert_eq!(given["options"]["document_text"]["lines"][1], "****");
+    assert_eq!(given["options"]["document_text"]["lines"][1], "48**");
+    // An alphabet the font cannot draw is refused, naming the field.
+    let bad = serde_json::json!({ "lines": ["PIN", "4821"], "width": 48, "height": 48, "scale": 2, "alphabet": "01€" });
+    let e = expect_error(
+        app.op_post("/v1/documents/text", &bad).await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "invalid",
+    )
+    .await;
+    assert_eq!(e["field"], "alphabet");
     // The layout is sealed: its text is nowhere in the clear at rest (the database included).
     let mut stack = vec![app.data_dir.clone()];
     while let Some(dir) = stack.pop() {

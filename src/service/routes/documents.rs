@@ -144,17 +144,18 @@ impl RenderDocument {
         Ok(glyphs::render_text(&lines, self.width, self.height, self.scale))
     }
 
-    /// The layout a job on the rendered document is judged with (None when no character of the text is in the
-    /// alphabet: nothing is secret), or the field that is wrong.
+    /// The layout a job on the rendered document is judged with, its secret characters masked (a job reads them
+    /// from the document), or None when no character of the text is in the alphabet (nothing is secret); or the
+    /// field that is wrong. Checked without drawing anything: `render` has placed every character.
     fn layout(&self) -> Result<Option<eyekey_core::evaluation::DocumentText>, ApiError> {
-        use eyekey_core::evaluation::{DocumentText, KnownFontAttacker, KnownFontError};
+        use eyekey_core::evaluation::{DocumentText, KnownFontError};
         let text = DocumentText {
             lines: self.lines.clone(),
             scale: self.scale,
             alphabet: self.alphabet.clone().unwrap_or_else(|| "0123456789".into()),
         };
-        match KnownFontAttacker::new(&text, self.width, self.height, self.width, self.height) {
-            Ok(_) => Ok(Some(text)),
+        match text.check_cheaply() {
+            Ok(()) => Ok(Some(text.masked())),
             Err(KnownFontError::NothingSecret) => Ok(None),
             Err(e) => Err(ApiError::invalid("alphabet", e.to_string())),
         }

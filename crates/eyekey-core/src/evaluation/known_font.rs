@@ -53,6 +53,49 @@ impl DocumentText {
         Ok(())
     }
 
+    /// The hint with every secret character (one of the alphabet) written [`MASK`]: the layout without the
+    /// secret, which [`DocumentText::resolve`] reads back from the document.
+    pub fn masked(&self) -> DocumentText {
+        let alphabet: Vec<char> = self.alphabet.chars().map(|c| c.to_ascii_uppercase()).collect();
+        DocumentText {
+            lines: self
+                .lines
+                .iter()
+                .map(|l| {
+                    l.chars()
+                        .map(|c| {
+                            if alphabet.contains(&c.to_ascii_uppercase()) {
+                                MASK
+                            } else {
+                                c
+                            }
+                        })
+                        .collect()
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
+
+    /// Checks, without drawing anything, that the hint can describe a document in eyekey's font: its size
+    /// ([`DocumentText::validate`]), an alphabet of two or more characters the font draws, and at least one secret
+    /// character in the text.
+    pub fn check_cheaply(&self) -> Result<(), KnownFontError> {
+        self.validate()?;
+        let alphabet: Vec<char> = self.alphabet.chars().map(|c| c.to_ascii_uppercase()).collect();
+        if alphabet.len() < 2 {
+            return Err(KnownFontError::Alphabet("needs at least two characters".into()));
+        }
+        if let Some(c) = alphabet.iter().find(|c| !glyphs::has_glyph(**c) || **c == ' ') {
+            return Err(KnownFontError::Alphabet(format!("the font has no glyph for '{c}'")));
+        }
+        let secret = |c: char| c == MASK || alphabet.contains(&c.to_ascii_uppercase());
+        if !self.lines.iter().any(|l| l.chars().any(secret)) {
+            return Err(KnownFontError::NothingSecret);
+        }
+        Ok(())
+    }
+
     /// The hint with every [`MASK`] replaced by the character the document shows there, and every secret
     /// character checked against the document: the known-font attacker reads the document itself (at its own
     /// resolution) and must find each cell's glyph with a correlation of at least 0.9.
