@@ -37,7 +37,8 @@ pub use write::*;
 
 use sha2::{Digest, Sha256};
 
-/// Version of the bundle layout written by [`write_bundle`]; [`read_bundle`] accepts only this one.
+/// Version of the bundle layout written by [`write_bundle`]; [`read_bundle`] also reads version 1, whose manifest
+/// recorded the encoder too (ignored).
 pub const FORMAT_VERSION: u32 = 2;
 
 /// Name of the manifest inside a bundle.
@@ -242,9 +243,10 @@ mod tests {
     }
 
     #[test]
-    fn a_manifest_that_carries_more_than_the_display_needs_is_refused() {
-        // A bundle of the first layout (which recorded the encoder's options, seed included) is refused for its
-        // version; one of this version with an extra field, for the field.
+    fn a_manifest_that_carries_more_than_the_display_needs_is_refused_but_the_first_layout_is_still_read() {
+        // A bundle of the first layout (which recorded the encoder's options, seed included) is still read, the
+        // record ignored; one of an unknown version is refused, and one of this version with an extra field, for
+        // the field.
         let root = tempfile::tempdir().unwrap();
         let dir = root.path().join("bundle");
         write_small(&dir);
@@ -257,10 +259,18 @@ mod tests {
         let pristine = fs::read(&path).unwrap();
         edit(&|m| {
             m.insert("format_version".into(), 1.into());
+            m.insert("created_at".into(), "2026-12-01T00:00:00Z".into());
+            m.insert("profile_label".into(), "alice@3".into());
             m.insert("encoder".into(), serde_json::json!({ "seed": 1 }));
+            m.insert("solver".into(), serde_json::json!({ "iterations": 12 }));
+        });
+        let (old, _) = read_bundle(&dir).unwrap();
+        assert_eq!(old.format_version, 1);
+        edit(&|m| {
+            m.insert("format_version".into(), 3.into());
         });
         let err = read_bundle(&dir).unwrap_err().to_string();
-        assert!(err.contains("format version 1 is not supported"), "{err}");
+        assert!(err.contains("format version 3 is not supported"), "{err}");
         fs::write(&path, &pristine).unwrap();
         edit(&|m| {
             m.insert("encoder".into(), serde_json::json!({ "seed": 1 }));

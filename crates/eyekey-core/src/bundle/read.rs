@@ -119,11 +119,22 @@ pub(crate) fn read_manifest(source: &mut Source) -> Result<(Vec<u8>, Manifest, L
     struct Version {
         format_version: u32,
     }
-    let version: Version =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
+    let bad = |e: serde_json::Error| BundleError::Manifest { reason: e.to_string() };
+    let version: Version = serde_json::from_slice(&manifest_bytes).map_err(bad)?;
     check_version(version.format_version)?;
-    let manifest: Manifest =
-        serde_json::from_slice(&manifest_bytes).map_err(|e| BundleError::Manifest { reason: e.to_string() })?;
+    let manifest: Manifest = if version.format_version == 1 {
+        // The first layout also recorded the encoder, the solver, the profile's label and a time; a display never
+        // needed them, and bundles made before they left are still shown.
+        let mut value: serde_json::Value = serde_json::from_slice(&manifest_bytes).map_err(bad)?;
+        if let Some(fields) = value.as_object_mut() {
+            for legacy in ["created_at", "profile_label", "encoder", "solver"] {
+                fields.remove(legacy);
+            }
+        }
+        serde_json::from_value(value).map_err(bad)?
+    } else {
+        serde_json::from_slice(&manifest_bytes).map_err(bad)?
+    };
     let layout = check_manifest(&manifest)?;
     Ok((manifest_bytes, manifest, layout))
 }
@@ -136,13 +147,13 @@ pub(crate) struct Layout {
     mask: usize,
 }
 
-/// Refuses a layout version other than [`FORMAT_VERSION`].
+/// Refuses a layout version other than [`FORMAT_VERSION`] and 1 (read with its encoder record ignored).
 fn check_version(version: u32) -> Result<(), BundleError> {
-    if version == FORMAT_VERSION {
+    if version == FORMAT_VERSION || version == 1 {
         return Ok(());
     }
     Err(BundleError::Manifest {
-        reason: format!("format version {version} is not supported (this reader knows {FORMAT_VERSION})"),
+        reason: format!("format version {version} is not supported (this reader knows 1 and {FORMAT_VERSION})"),
     })
 }
 
