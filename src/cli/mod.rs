@@ -441,7 +441,8 @@ pub struct EncodeArgs {
     /// for frames whose target is stacked on a ring (`--head-radius`).
     #[arg(long)]
     pub camera_decoy_ring: Option<f64>,
-    /// Output bundle directory (must not exist).
+    /// Output bundle directory (must not exist): the bundle (the files its manifest lists) and, beside it, the
+    /// operator's `encoding.json` with the seed, which must not go to a display.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -968,7 +969,7 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         eprintln!("target {}", reading.describe());
     }
     eprintln!(
-        "wrote {} in {:.1} s (solver: {} iterations, {}; {} seed in {}, never in the bundle)",
+        "wrote {} in {:.1} s (solver: {} iterations, {}; {} seed in {}, beside the bundle and not listed in its manifest: copy only the manifest's files to a display)",
         a.out.display(),
         started.elapsed().as_secs_f64(),
         encoded.solver.iterations,
