@@ -100,18 +100,11 @@ pub fn run(
             };
             // The encoded light field as the evaluation sees it, with `options`, the target refocused by `dd`.
             let judge_at = |options: &EvaluationOptions, dd: f64| {
-                let mut person = target.clone();
-                if dd != 0.0 {
-                    let mut p = person
-                        .prescription
-                        .unwrap_or(eyekey_core::physics::zernike::Prescription {
-                            sphere_d: 0.0,
-                            cylinder_d: 0.0,
-                            axis_deg: 0.0,
-                        });
-                    p.sphere_d += dd;
-                    person.prescription = Some(p);
-                }
+                let person = if dd == 0.0 {
+                    target.clone()
+                } else {
+                    target.refocused(dd)
+                };
                 evaluate(
                     &display,
                     &enc.light_field,

@@ -770,13 +770,22 @@ impl Cast {
         readable && worst.is_none_or(|w| w >= margin)
     }
 
-    /// The target's reading of `l` through its own operator and the check's, whichever is further from reading
-    /// (the lower score past the bar).
-    fn worse_target_reading(&self, reference: &Reference, l: &[f32], margin: f64) -> crate::evaluation::TargetReading {
+    /// The target's view of `l` scored by `reference` through every look the guard judges: its own operator, the
+    /// check's, and each focus state's.
+    fn target_scores(&self, reference: &Reference, l: &[f32]) -> Vec<crate::evaluation::ViewScore> {
         [&self.target, &self.check]
             .into_iter()
             .chain(&self.focused)
-            .map(|o| reference.target_reading(&reference.score_observer("target", o, l).0, margin))
+            .map(|o| reference.score_observer("target", o, l).0)
+            .collect()
+    }
+
+    /// The target's reading of `l` through its own operator and the check's, whichever is further from reading
+    /// (the lower score past the bar).
+    fn worse_target_reading(&self, reference: &Reference, l: &[f32], margin: f64) -> crate::evaluation::TargetReading {
+        self.target_scores(reference, l)
+            .iter()
+            .map(|s| reference.target_reading(s, margin))
             .min_by(|a, b| {
                 (a.reads, a.margin())
                     .partial_cmp(&(b.reads, b.margin()))
@@ -788,11 +797,7 @@ impl Cast {
     /// How the target reads `l` by `reference` through its own operator and the check's: whether both looks
     /// read it, and the smaller of their known-font margins (None where the text is not known).
     fn target_reading(&self, reference: &Reference, l: &[f32]) -> (bool, Option<f64>) {
-        let scores: Vec<crate::evaluation::ViewScore> = [&self.target, &self.check]
-            .into_iter()
-            .chain(&self.focused)
-            .map(|o| reference.score_observer("target", o, l).0)
-            .collect();
+        let scores = self.target_scores(reference, l);
         // The target's bar (every secret character right, or the reads threshold without a text hint), not the
         // "might read" one everybody else is held under; in its own focus and in each focus state asked.
         let readable = scores.iter().all(|s| reference.target_reading(s, 0.0).reads);
@@ -1296,17 +1301,9 @@ fn look_at_focus(
     topts: &TransportOptions,
     cache: &TransportCache,
 ) -> Result<Observer, PipelineError> {
-    let mut person = spec.target.clone();
-    let mut p = person.prescription.unwrap_or(crate::physics::zernike::Prescription {
-        sphere_d: 0.0,
-        cylinder_d: 0.0,
-        axis_deg: 0.0,
-    });
-    p.sphere_d += dd;
-    person.prescription = Some(p);
     Observer::new(
         &spec.display,
-        &person,
+        &spec.target.refocused(dd),
         EyePosition::default(),
         topts,
         spec.options.optics,

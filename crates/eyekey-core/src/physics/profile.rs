@@ -160,6 +160,21 @@ impl VisionProfile {
         Ok(())
     }
 
+    /// The same eye focused `dd` dioptres away: `dd` added to its prescription's sphere (an eye without one gets
+    /// a pure sphere), as an eye's accommodation drifts while it looks.
+    pub fn refocused(&self, dd: f64) -> Self {
+        let mut p = self.prescription.unwrap_or(Prescription {
+            sphere_d: 0.0,
+            cylinder_d: 0.0,
+            axis_deg: 0.0,
+        });
+        p.sphere_d += dd;
+        Self {
+            prescription: Some(p),
+            ..self.clone()
+        }
+    }
+
     /// The wavefront the display meets: coefficients rescaled to the viewing pupil (ISO 24157 Annex B), with
     /// the prescription's defocus and astigmatism added, piston and tilt removed (tilt only shifts the
     /// whole retinal image).
@@ -267,5 +282,10 @@ mod tests {
         let w = p.effective_wavefront().unwrap();
         // −2.00 D at 6 mm: C(2,0) = −M·r²/(4√3) = 2·9/(4√3) = 2.598 µm.
         assert!((w.get(4) - 2.598).abs() < 1e-3, "{}", w.get(4));
+        // Refocusing adds to the sphere: the perfect eye refocused by −2 D meets the same wavefront, and the
+        // prescribed eye refocused by +2 D none.
+        let refocused = VisionProfile::perfect().refocused(-2.0).effective_wavefront().unwrap();
+        assert!((refocused.get(4) - 2.598).abs() < 1e-3, "{}", refocused.get(4));
+        assert!(p.refocused(2.0).effective_wavefront().unwrap().get(4).abs() < 1e-9);
     }
 }
