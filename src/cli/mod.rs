@@ -217,9 +217,33 @@ pub enum ExperimentCommand {
         /// known-font attacker).
         #[arg(long)]
         no_hint: bool,
-        /// Instead of the default: focus states the target must read in too (repeatable; `target_focus_d`).
+        /// How hard to hide, at what cost to the target's comfort (`security`).
+        #[arg(long, value_enum, default_value = "standard")]
+        security: eyekey_core::encoding::pipeline::Security,
+        /// Instead of the security level's: focus states the target must read in too (repeatable;
+        /// `target_focus_d`).
         #[arg(long, allow_hyphen_values = true)]
         target_focus: Vec<f64>,
+        /// Instead of the security level's: pupil states the target must read in too (repeatable;
+        /// `target_pupil_mm`).
+        #[arg(long, allow_hyphen_values = true)]
+        target_pupil: Vec<f64>,
+        /// Draws tried, the best kept by the encoder's own check (`draws`).
+        #[arg(long, default_value_t = 1)]
+        draws: u32,
+        /// The held-out targets' pupils are drawn uniformly in 3–7 mm, their aberrations stated over 7.5 mm,
+        /// instead of the population's 4–7 mm.
+        #[arg(long)]
+        wide_pupils: bool,
+        /// The documents in this font instead of eyekey's, a file name in Debian's font directories such as
+        /// `DejaVuSerif.ttf` (`bash tests/fonts/install.sh` installs them), encoded as uploaded images (eyekey's
+        /// text hint describes its own font only); the experiment's known-font attacker is drawn in it.
+        #[arg(long)]
+        font: Option<String>,
+        /// With `--font`: documents of two lines of text ("A" and "B", each with four digits) instead of PIN
+        /// slips.
+        #[arg(long)]
+        two_lines: bool,
         /// Instead of the default: population decoys.
         #[arg(long)]
         decoys: Option<u32>,
@@ -396,10 +420,19 @@ pub struct EncodeArgs {
     /// The document's text, font scale and secret alphabet, where it was drawn by eyekey.
     #[command(flatten)]
     pub hint: TextHintArgs,
-    /// Instead of the default: a focus state the target must read in too, dioptres added to its sphere
-    /// (repeatable; `target_focus_d`).
+    /// How hard to hide, at what cost to the target's comfort: `standard` asks the target to read while its
+    /// focus drifts ±0.25 D and its pupil ±0.5 mm; `strict` lets the fewest people at the seat read and asks
+    /// the target to hold its profile's focus (docs/experiments.md §0).
+    #[arg(long, value_enum, default_value = "standard")]
+    pub security: eyekey_core::encoding::pipeline::Security,
+    /// Instead of the security level's: a focus state the target must read in too, dioptres added to its
+    /// sphere (repeatable; `target_focus_d`).
     #[arg(long, allow_hyphen_values = true)]
     pub target_focus: Vec<f64>,
+    /// Instead of the security level's: a pupil state the target must read in too, mm added to its viewing
+    /// pupil (repeatable; `target_pupil_mm`).
+    #[arg(long, allow_hyphen_values = true)]
+    pub target_pupil: Vec<f64>,
     /// Encoder.
     #[arg(long, value_enum, default_value = "multiplex")]
     pub method: Method,
@@ -742,7 +775,13 @@ pub fn run(cli: Cli) -> Result<()> {
             preset,
             decoys_at_target_pupil,
             no_hint,
+            security,
             target_focus,
+            target_pupil,
+            draws,
+            wide_pupils,
+            font,
+            two_lines,
             decoys,
             decoy_weight,
             leak_weight,
@@ -763,17 +802,26 @@ pub fn run(cli: Cli) -> Result<()> {
                 target_margin: target_margin.unwrap_or(d.target_margin),
                 adaptive_rounds: adaptive_rounds.unwrap_or(d.adaptive_rounds),
                 seed: Some(seed.unwrap_or(crate::research::EXPERIMENT_SEED)),
-                target_focus_d: if target_focus.is_empty() {
-                    d.target_focus_d.clone()
-                } else {
-                    target_focus
-                },
+                security,
+                target_focus_d: target_focus,
+                target_pupil_mm: target_pupil,
+                draws,
                 ..d
             };
-            print!(
-                "{}",
-                crate::research::defaults::run(&out, targets, population, target_looks, &preset, options, !no_hint)?
-            );
+            let documents = match (font, two_lines) {
+                (None, false) => crate::research::defaults::Documents::PinSlips,
+                (Some(font), lines) => crate::research::defaults::Documents::InFont { font, lines },
+                (None, true) => anyhow::bail!("--two-lines needs --font"),
+            };
+            let setup = crate::research::defaults::Setup {
+                targets,
+                population,
+                target_looks,
+                hint: !no_hint,
+                wide_pupils,
+                documents,
+            };
+            print!("{}", crate::research::defaults::run(&out, &setup, &preset, options)?);
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
@@ -938,11 +986,9 @@ fn encode(a: &EncodeArgs) -> Result<()> {
         camera_decoys: a.camera_decoys || d.camera_decoys,
         camera_decoy_ring_mm: a.camera_decoy_ring.unwrap_or(d.camera_decoy_ring_mm),
         document_text: a.hint.hint(),
-        target_focus_d: if a.target_focus.is_empty() {
-            d.target_focus_d.clone()
-        } else {
-            a.target_focus.clone()
-        },
+        security: a.security,
+        target_focus_d: a.target_focus.clone(),
+        target_pupil_mm: a.target_pupil.clone(),
         ..d.clone()
     };
     if options.decoy == DecoyKind::Image && decoy.is_none() {
@@ -968,6 +1014,15 @@ fn encode(a: &EncodeArgs) -> Result<()> {
     if let Some(reading) = &encoded.solver.target_reading {
         eprintln!("target {}", reading.describe());
     }
+    let o = &spec.options;
+    eprintln!(
+        "security {}: the target was asked to read in {} states besides its profile's (focus {:?} D, pupil {:?} mm; \
+         a pupil the profile was not measured over is not tried); `eyekey evaluate` says who else reads",
+        format!("{:?}", o.security).to_lowercase(),
+        eyekey_core::encoding::pipeline::target_states(&spec).len(),
+        o.focus_states_d(),
+        o.pupil_states_mm(),
+    );
     eprintln!(
         "wrote {} in {:.1} s (solver: {} iterations, {}; {} seed in {}, beside the bundle and not listed in its manifest: copy only the manifest's files to a display)",
         a.out.display(),

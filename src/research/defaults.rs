@@ -1,9 +1,11 @@
-//! `eyekey experiment defaults`: does every preset's default encode serve its target? For each display preset,
-//! held-out targets (people sampled with seeds no encoder or evaluation uses, at their own pupils) each get a PIN
-//! slip of their own digits, encoded with the default options (`EncodeOptions::default()`) and the slip's text
-//! hint (or, with `--no-hint`, as an uploaded image: the encoder then holds the target to the reads bar of
-//! legibility); the known-font attacker judges the target's view, and held-out people at the target's
-//! position say who else reads. A target whose encode fails (`target_cannot_read`) is a row of its own.
+//! `eyekey experiment defaults`: does the target read what a default encode makes for it? For each display
+//! preset, held-out targets (people sampled with seeds no encoder or evaluation uses) each get a document of their
+//! own digits: a PIN slip in eyekey's font, encoded with its text hint (or, with `--no-hint`, as an uploaded image,
+//! which the encoder then holds to the reads bar of legibility), or a PIN slip or two lines of text in a font eyekey
+//! does not draw (always uploaded). The known-font attacker for the document's own font and layout reads the
+//! target's view under four kernel draws at its profile's focus and refocused by ±0.25 D, and once with its pupil
+//! 0.5 mm narrower and wider; held-out people at the target's seat say who else reads. A target whose encode fails
+//! (`target_cannot_read`) counts as not reading.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -11,250 +13,386 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::Result;
+use image::RgbImage;
 use rand::{Rng, SeedableRng};
 
 use super::experiment::pin_slip_of;
+use super::fonts::{draw_filling, DocFont};
 use super::table_header;
-use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, OBJECTIVE_LEVEL};
-use eyekey_core::evaluation::{evaluate, EvaluationOptions};
+use eyekey_core::encoding::pipeline::{encode, EncodeOptions, JobSpec, PipelineError, OBJECTIVE_LEVEL};
+use eyekey_core::evaluation::{
+    luminance, luminance_of, EvaluationOptions, KnownFontAttacker, Reference, DEFAULT_THRESHOLD,
+};
 use eyekey_core::physics::display::{DisplayGeometry, PRESETS};
-use eyekey_core::physics::population::sample_population;
-use eyekey_core::physics::transport::TransportCache;
+use eyekey_core::physics::observer::Observer;
+use eyekey_core::physics::population::{sample_person_with_pupil, sample_population};
+use eyekey_core::physics::profile::VisionProfile;
+use eyekey_core::physics::transport::{EyePosition, TransportCache, TransportOptions};
 
-/// Runs `targets` held-out targets on every preset (or those named in `only`), each encoded with `options` (the
-/// defaults, or variants of them) and judged with `population` held-out people; the target's view is also
-/// drawn with `target_looks` further evaluation seeds (the kernels' sampling noise), each read by the known-font
-/// attacker. Without `hint` the encoder is not told the slip's text (the evaluation still is). Writes
-/// `out/defaults.md`; returns it.
-pub fn run(
-    out: &Path,
-    targets: u32,
-    population: u32,
-    target_looks: u32,
-    only: &[String],
-    options: EncodeOptions,
-    hint: bool,
-) -> Result<String> {
+/// The documents an experiment run encodes.
+pub enum Documents {
+    /// PIN slips in eyekey's 5×7 font ("PIN" over four digits), as `eyekey example document` draws them.
+    PinSlips,
+    /// Documents in a font eyekey does not draw (a file name in Debian's font directories): a PIN slip, or with
+    /// `lines` two lines of text ("A" and "B", each with four digits; eight secret characters).
+    InFont {
+        /// The font's file name.
+        font: String,
+        /// Two lines of text instead of a PIN slip.
+        lines: bool,
+    },
+}
+
+/// What one run measures.
+pub struct Setup {
+    /// Held-out targets per display.
+    pub targets: u32,
+    /// Held-out people at each target's seat.
+    pub population: u32,
+    /// Kernel draws of each of the target's looks (the evaluation's and further seeds).
+    pub target_looks: u32,
+    /// The encoder is told a PIN slip's text (eyekey's font only).
+    pub hint: bool,
+    /// Targets' pupils spread evenly over 3–7 mm, their aberrations stated over 7.5 mm (else the population's
+    /// 4–7 mm, stated at the viewing pupil).
+    pub wide_pupils: bool,
+    /// The documents.
+    pub documents: Documents,
+}
+
+/// One target's document and the attacker that knows its font and layout.
+struct Document {
+    image: RgbImage,
+    text: String,
+    hint: Option<eyekey_core::evaluation::DocumentText>,
+    attacker: KnownFontAttacker,
+}
+
+impl Documents {
+    /// The name in tables.
+    fn name(&self, hint: bool) -> String {
+        match self {
+            Self::PinSlips if hint => "PIN slip in eyekey's font, text hint".into(),
+            Self::PinSlips => "PIN slip in eyekey's font, uploaded".into(),
+            Self::InFont { font, lines: false } => format!("PIN slip in {font}, uploaded"),
+            Self::InFont { font, lines: true } => format!("two lines in {font}, uploaded"),
+        }
+    }
+
+    /// Target `k`'s document on a `width`×`height` page read on a `grid`-sized retina, of `digits` (eight).
+    fn draw(
+        &self,
+        font: Option<&DocFont>,
+        digits: &str,
+        size: (u32, u32),
+        grid: (u32, u32),
+        hint: bool,
+    ) -> Result<Document> {
+        let (width, height) = size;
+        match (self, font) {
+            (Self::PinSlips, _) => {
+                let (image, text) = pin_slip_of(width, height, &digits[..4]);
+                let attacker = KnownFontAttacker::new(&text, width, height, grid.0, grid.1)?;
+                Ok(Document {
+                    image,
+                    text: digits[..4].to_string(),
+                    hint: hint.then_some(text),
+                    attacker,
+                })
+            }
+            (Self::InFont { lines, .. }, Some(font)) => {
+                let text: Vec<String> = if *lines {
+                    vec![format!("A {}", &digits[..4]), format!("B {}", &digits[4..])]
+                } else {
+                    vec!["PIN".into(), digits[..4].to_string()]
+                };
+                let drawn = draw_filling(font, &text, 0.85, width, height, grid)?;
+                Ok(Document {
+                    image: drawn.document,
+                    text: text.join(" / "),
+                    hint: None,
+                    attacker: drawn.attacker,
+                })
+            }
+            (Self::InFont { .. }, None) => anyhow::bail!("no font loaded"),
+        }
+    }
+}
+
+/// The seed of the `j`-th kernel draw the experiment views with: the evaluation's (j = 0), then others 1,000
+/// apart, none of them the encoder's.
+fn look_seed(j: u32) -> u64 {
+    EvaluationOptions {
+        seed: EvaluationOptions::default().seed.wrapping_add(1_000 * u64::from(j)),
+        ..Default::default()
+    }
+    .transport_seed()
+}
+
+/// How one look reads: the known-font attacker's margin (negative when a character is misread) and legibility.
+#[derive(Clone, Copy)]
+struct Look {
+    reads: bool,
+    margin: f64,
+    legibility: f64,
+}
+
+/// Runs `setup` on every preset (or those named in `only`), each target encoded with `options` (seed and all).
+/// Writes `out/defaults.md` (a summary per display, then a row per target); returns it.
+pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -> Result<String> {
     options.validate().map_err(|e| anyhow::anyhow!("encode options: {e}"))?;
     std::fs::create_dir_all(out)?;
-    let mut md = table_header(&[
+    let font = match &setup.documents {
+        Documents::InFont { font, .. } => Some(DocFont::load(font)?),
+        Documents::PinSlips => None,
+    };
+    let doc_name = setup.documents.name(setup.hint);
+    let mut rows = table_header(&[
         "preset",
         "target (pupil)",
-        "PIN",
+        "document",
         "encode",
         "decoys' weight: start × scale",
-        "target: legibility, known font",
-        "target read under other evaluation seeds (worst legibility, worst known-font margin)",
-        "target with 8× the sub-rays: legibility, known font",
-        "target refocused: legibility, known-font margin",
-        "held-out people who read",
-        "their pupils",
-        "wavefront difference from the target's (RMS, orders ≥ 2): readers' median, everyone's median",
+        "at focus: draws read (worst margin, worst legibility)",
+        "−0.25 D: draws read (worst margin)",
+        "+0.25 D: draws read (worst margin)",
+        "pupil −0.5 / +0.5 mm: margin",
+        "held-out people who read: known font; legibility ≥ 0.22",
+    ]);
+    let mut summary = table_header(&[
+        "display",
+        "document",
+        "security",
+        "targets (pupils)",
+        "read at focus, every draw",
+        "read at −0.25 and +0.25 D, every draw",
+        "read in all three",
+        "worst margin at focus (range over targets)",
+        "people at the seat who read: known font",
+        "legibility ≥ 0.22",
+        "encode, median (max)",
     ]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xD0C5);
     for &name in PRESETS {
-        // Every preset's PINs are drawn whether it runs or not, so a run of some presets sees the same documents
+        // Every preset's digits are drawn whether it runs or not, so a run of some presets sees the same documents
         // as a run of all.
-        let pins: Vec<String> = (0..targets)
-            .map(|_| (0..4).map(|_| char::from(b'0' + rng.gen_range(0..10u8))).collect())
+        let digits: Vec<String> = (0..setup.targets)
+            .map(|_| (0..8).map(|_| char::from(b'0' + rng.gen_range(0..10u8))).collect())
             .collect();
         if !only.is_empty() && !only.iter().any(|o| o == name) {
             continue;
         }
         let display = DisplayGeometry::preset(name)?;
         let cache = TransportCache::default();
-        for (k, digits) in pins.into_iter().enumerate() {
-            let target = sample_population(1, 0xD0C5_0000 + k as u64, Default::default()).remove(0);
-            let (document, text) = pin_slip_of(display.holes_x * 4, display.holes_y * 4, &digits);
+        let mut tally = Tally::default();
+        for (k, digits) in digits.iter().enumerate() {
+            let target = held_out_target(k, setup);
+            let view = |person: &VisionProfile, j: u32| -> Result<Observer> {
+                let topts = TransportOptions {
+                    sub_rays: EvaluationOptions::default().sub_rays,
+                    seed: look_seed(j),
+                    ..Default::default()
+                };
+                Ok(Observer::new(
+                    &display,
+                    person,
+                    EyePosition::default(),
+                    &topts,
+                    options.optics,
+                    &cache,
+                )?)
+            };
+            let g = view(&target, 0)?.grid();
+            let doc = setup.documents.draw(
+                font.as_ref(),
+                digits,
+                (display.holes_x * 4, display.holes_y * 4),
+                (g.width, g.height),
+                setup.hint,
+            )?;
+            let reference = Reference::new(&doc.image, g.width, g.height, OBJECTIVE_LEVEL, DEFAULT_THRESHOLD);
             let spec = JobSpec {
                 display: display.clone(),
                 target: target.clone(),
                 target_label: format!("held-out target {k}"),
                 observers: vec![],
-                document: document.clone(),
+                document: doc.image.clone(),
                 decoy: None,
                 options: EncodeOptions {
-                    document_text: hint.then(|| text.clone()),
+                    document_text: doc.hint.clone(),
                     ..options.clone()
                 },
             };
             let t = Instant::now();
-            let enc = match encode(&spec, &cache, &|_| {}, &AtomicBool::new(false)) {
+            let encoded = encode(&spec, &cache, &|_| {}, &AtomicBool::new(false));
+            let seconds = t.elapsed().as_secs_f64();
+            tally.seconds.push(seconds);
+            let pupil = target.pupil_diameter_mm;
+            tally.pupils.push(pupil);
+            let enc = match encoded {
                 Ok(enc) => enc,
-                Err(e @ eyekey_core::encoding::pipeline::PipelineError::TargetCannotRead { .. }) => {
+                // Refused before the solve (text too small for the legibility judge on this display) or after it
+                // (the target cannot read): either way the target is not shown the document.
+                Err(e @ (PipelineError::TargetCannotRead { .. } | PipelineError::Invalid { .. })) => {
+                    tally.failed += 1;
                     writeln!(
-                        md,
-                        "| `{name}` | {k} ({:.1} mm) | {digits} | {:.0} s | **{e}** | | | | | | | |",
-                        target.pupil_diameter_mm,
-                        t.elapsed().as_secs_f64()
+                        rows,
+                        "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | **{e}** | | | | | |",
+                        doc.text
                     )?;
-                    eprintln!("{}", md.lines().last().unwrap_or(""));
+                    eprintln!("{}", rows.lines().last().unwrap_or(""));
                     continue;
                 }
                 Err(e) => return Err(e.into()),
             };
-            let t_encode = t.elapsed().as_secs_f64();
-            let eval_options = EvaluationOptions {
-                optics: options.optics,
-                ..EvaluationOptions::population_only(population, Some(text))
-            };
-            // The encoded light field as the evaluation sees it, with `options`, the target refocused by `dd`.
-            let judge_at = |options: &EvaluationOptions, dd: f64| {
-                let person = if dd == 0.0 {
-                    target.clone()
-                } else {
-                    target.refocused(dd)
-                };
-                evaluate(
-                    &display,
-                    &enc.light_field,
-                    &document,
-                    OBJECTIVE_LEVEL,
-                    &person,
-                    &[],
-                    options,
-                    &cache,
-                    &|_| {},
-                    &AtomicBool::new(false),
-                )
-            };
-            let judge = |options: &EvaluationOptions| judge_at(options, 0.0);
-            let ev = judge(&eval_options)?;
-            // The target's view alone, its kernels drawn with `seed` and `sub_rays`.
-            let target_view = |seed: u64, sub_rays: u32| {
-                judge(&EvaluationOptions {
-                    optics: eval_options.optics,
-                    seed,
-                    sub_rays,
-                    ..EvaluationOptions::population_only(0, eval_options.document_text.clone())
-                })
-                .map(|ev| ev.report.target)
-            };
-            // The same view drawn with other evaluation seeds: a borderline target reads under some and not others.
-            let (mut looks_read, mut worst, mut worst_margin) = (0, f64::INFINITY, f64::INFINITY);
-            for j in 1..=target_looks {
-                let look = target_view(eval_options.seed.wrapping_add(1_000 * j as u64), eval_options.sub_rays)?;
-                looks_read += u32::from(look.readable);
-                worst = worst.min(look.legibility);
-                if let Some(k) = &look.known_font {
-                    worst_margin = worst_margin.min(k.margin);
+            let l = &enc.light_field;
+            let look = |o: &Observer| -> Look {
+                let lum = luminance(&o.view(l));
+                let read = doc.attacker.read(&lum);
+                Look {
+                    reads: read.correct,
+                    margin: read.margin,
+                    legibility: reference.score("", &lum, luminance_of(o.white)).legibility,
                 }
-            }
-            // And once with 8 times the evaluation's sub-rays: kernels near their expectation, which is what a
-            // real eye sees.
-            // Refocused by ±0.25 D (accommodation's drift while one looks), judged by the known-font attacker.
-            let mut refocused = Vec::new();
-            for dd in [-0.25, 0.25] {
-                let t = judge_at(
-                    &EvaluationOptions {
-                        optics: eval_options.optics,
-                        ..EvaluationOptions::population_only(0, eval_options.document_text.clone())
-                    },
-                    dd,
-                )?
-                .report
-                .target;
-                refocused.push(format!(
-                    "{:+.2} D: {:.2}, {}{}",
-                    dd,
-                    t.legibility,
-                    t.known_font
-                        .as_ref()
-                        .map_or("–".into(), |k| format!("{:+.3}", k.margin)),
-                    if t.readable { "" } else { " **not read**" }
-                ));
-            }
-            let refocused = refocused.join("; ");
-            let converged = target_view(eval_options.seed, 8 * eval_options.sub_rays)?;
-            let converged = format!(
-                "{:.2}, {}{}",
-                converged.legibility,
-                super::known_font_cell(&converged),
-                if converged.readable { "" } else { " **not read**" }
-            );
-            let looks = if target_looks == 0 {
-                "–".to_string()
-            } else {
-                format!("{looks_read} of {target_looks} ({worst:.2}, {worst_margin:+.3})")
             };
-            let r = &ev.report;
-            let kf = super::known_font_cell(&r.target);
-            let p = r.population.as_ref().expect("a population was asked for");
-            // The readers' pupils: the evaluation's people, drawn again with its seed.
-            let people = sample_population(population as usize, eval_options.seed, Default::default());
-            let mut pupils: Vec<f64> = p
-                .people
+            // The person's looks under every kernel draw: how many read, and the worst.
+            let draws = |person: &VisionProfile| -> Result<(u32, Look)> {
+                let mut worst = Look {
+                    reads: true,
+                    margin: f64::INFINITY,
+                    legibility: f64::INFINITY,
+                };
+                let mut read = 0;
+                for j in 0..setup.target_looks.max(1) {
+                    let s = look(&view(person, j)?);
+                    read += u32::from(s.reads);
+                    worst.reads &= s.reads;
+                    worst.margin = worst.margin.min(s.margin);
+                    worst.legibility = worst.legibility.min(s.legibility);
+                }
+                Ok((read, worst))
+            };
+            let n = setup.target_looks.max(1);
+            let (at_focus, focus_worst) = draws(&target)?;
+            let (near, near_worst) = draws(&target.refocused(-0.25))?;
+            let (far, far_worst) = draws(&target.refocused(0.25))?;
+            let pupils: Vec<Look> = [-0.5, 0.5]
                 .iter()
-                .filter(|s| s.readable)
-                .filter_map(|s| s.label.strip_prefix("person_")?.parse::<usize>().ok())
-                .filter_map(|k| Some(people.get(k)?.pupil_diameter_mm))
-                .collect();
-            pupils.sort_by(f64::total_cmp);
-            // How far each person's eye is from the target's: the RMS of the difference of the two wavefronts over
-            // the smaller of the two pupils (both given that pupil, ANSI Z80.28 Annex B), defocus and above.
-            let differences: Vec<(bool, f64)> = p
-                .people
-                .iter()
-                .filter_map(|s| {
-                    let k = s.label.strip_prefix("person_")?.parse::<usize>().ok()?;
-                    Some((s.readable, wavefront_difference_um(people.get(k)?, &target).ok()?))
-                })
-                .collect();
-            let median = |mut v: Vec<f64>| {
-                v.sort_by(f64::total_cmp);
-                v.get(v.len() / 2).map_or("–".to_string(), |m| format!("{m:.2} µm"))
-            };
-            let distance = format!(
-                "{}, {}",
-                median(differences.iter().filter(|d| d.0).map(|d| d.1).collect()),
-                median(differences.iter().map(|d| d.1).collect())
+                .map(|&dp| view(&target.with_pupil_changed(dp), 0).map(|o| look(&o)))
+                .collect::<Result<_>>()?;
+            let people = sample_population(
+                setup.population as usize,
+                EvaluationOptions::default().seed,
+                Default::default(),
             );
-            let smaller = pupils.iter().filter(|&&q| q <= target.pupil_diameter_mm).count();
-            let readers = match (pupils.first(), pupils.last()) {
-                (Some(lo), Some(hi)) => format!(
-                    "{lo:.1}–{hi:.1} mm, median {:.1}; {smaller} at most the target's",
-                    pupils[pupils.len() / 2]
-                ),
-                _ => "–".into(),
-            };
+            let (mut by_font, mut by_legibility) = (0, 0);
+            for person in &people {
+                let s = look(&view(person, 0)?);
+                by_font += u32::from(s.reads);
+                by_legibility += u32::from(s.legibility >= DEFAULT_THRESHOLD);
+            }
+            tally.read_focus += u32::from(at_focus == n);
+            tally.read_refocused += u32::from(near == n && far == n);
+            tally.read_all += u32::from(at_focus == n && near == n && far == n);
+            tally.margins.push(focus_worst.margin);
+            tally.people += people.len() as u32;
+            tally.by_font += by_font;
+            tally.by_legibility += by_legibility;
+            let mark = |r: u32| if r == n { String::new() } else { " **misread**".into() };
             writeln!(
-                md,
-                "| `{name}` | {k} ({:.1} mm) | {digits} | {t_encode:.0} s | {} × {:.3} | {:.2}, {kf}{} | {looks} | {converged} | {refocused} | {} of {} | {readers} | {distance} |",
-                target.pupil_diameter_mm,
+                rows,
+                "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | {:.3} × {:.3} | {at_focus} of {n} ({:+.3}, {:.2}){} | {near} of {n} ({:+.3}){} | {far} of {n} ({:+.3}){} | {:+.3}, {:+.3} | {by_font}; {by_legibility} of {} |",
+                doc.text,
                 options.decoy_weight_on(&display),
                 enc.solver.decoy_weight_scale,
-                r.target.legibility,
-                if r.target.readable { "" } else { " **not read**" },
-                p.readable_count,
-                p.count,
+                focus_worst.margin,
+                focus_worst.legibility,
+                mark(at_focus),
+                near_worst.margin,
+                mark(near),
+                far_worst.margin,
+                mark(far),
+                pupils[0].margin,
+                pupils[1].margin,
+                people.len(),
             )?;
-            eprintln!("{}", md.lines().last().unwrap_or(""));
+            eprintln!("{}", rows.lines().last().unwrap_or(""));
         }
+        writeln!(summary, "{}", tally.row(name, &doc_name, &options))?;
     }
+    let md = format!("{summary}\n{rows}");
     std::fs::write(out.join("defaults.md"), &md)?;
     Ok(md)
 }
 
-/// The RMS (µm) of the difference between `a`'s and `b`'s wavefronts in radial orders 2 and up, both over the
-/// smaller of their two pupils (the larger rescaled to it, ANSI Z80.28 Annex B): with unit-RMS terms, the root of
-/// the summed squared coefficient differences.
-fn wavefront_difference_um(
-    a: &eyekey_core::physics::profile::VisionProfile,
-    b: &eyekey_core::physics::profile::VisionProfile,
-) -> Result<f64> {
-    use eyekey_core::physics::zernike::{ZernikeCoefficients, MAX_RADIAL_ORDER};
-    let pupil = a.pupil_diameter_mm.min(b.pupil_diameter_mm);
-    let at = |p: &eyekey_core::physics::profile::VisionProfile| -> Result<Vec<f64>> {
-        Ok(ZernikeCoefficients::new(p.pupil_diameter_mm, p.zernike_um.clone())?
-            .rescaled(pupil)?
-            .coefficients_um)
-    };
-    let (ca, cb) = (at(a)?, at(b)?);
-    let n = ca.len().max(cb.len());
-    let diff: Vec<f64> = (0..n)
-        .map(|j| ca.get(j).copied().unwrap_or(0.0) - cb.get(j).copied().unwrap_or(0.0))
-        .collect();
-    Ok(ZernikeCoefficients::new(pupil, diff)?.rms_um(2..=MAX_RADIAL_ORDER))
+/// Held-out target `k`: a person sampled with a seed no encoder or evaluation uses; with `wide_pupils`, viewing
+/// through the `k`-th of pupils spread evenly over 3–7 mm.
+fn held_out_target(k: usize, setup: &Setup) -> VisionProfile {
+    let seed = 0xD0C5_0000 + k as u64;
+    if setup.wide_pupils {
+        let pupil = 3.0 + 4.0 * (k as f64 + 0.5) / f64::from(setup.targets.max(1));
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        sample_person_with_pupil(&mut rng, Default::default(), pupil)
+    } else {
+        sample_population(1, seed, Default::default()).remove(0)
+    }
+}
+
+/// One display's figures over its targets.
+#[derive(Default)]
+struct Tally {
+    pupils: Vec<f64>,
+    seconds: Vec<f64>,
+    margins: Vec<f64>,
+    failed: u32,
+    read_focus: u32,
+    read_refocused: u32,
+    read_all: u32,
+    people: u32,
+    by_font: u32,
+    by_legibility: u32,
+}
+
+impl Tally {
+    fn row(&self, display: &str, document: &str, options: &EncodeOptions) -> String {
+        let n = self.pupils.len();
+        let range = |v: &[f64]| {
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (lo, hi)
+        };
+        let (plo, phi) = range(&self.pupils);
+        let margins = match range(&self.margins) {
+            _ if self.margins.is_empty() => "–".to_string(),
+            (lo, hi) => format!("{lo:+.3} to {hi:+.3}"),
+        };
+        let mut seconds = self.seconds.clone();
+        seconds.sort_by(f64::total_cmp);
+        let median = seconds.get(seconds.len() / 2).copied().unwrap_or(0.0);
+        let pct = |a: u32, b: u32| 100.0 * f64::from(a) / f64::from(b.max(1));
+        let failed = if self.failed > 0 {
+            format!(" ({} refused)", self.failed)
+        } else {
+            String::new()
+        };
+        format!(
+            "| `{display}` | {document} | {} | {n} ({plo:.1}–{phi:.1} mm) | {} of {n}{failed} | {} of {n} | {} of {n} | {margins} | {} of {} ({:.1} %) | {} of {} ({:.1} %) | {median:.0} s ({:.0} s) |",
+            match options.draws {
+                1 => format!("{:?}", options.security).to_lowercase(),
+                n => format!("{:?}, best of {n} draws", options.security).to_lowercase(),
+            },
+            self.read_focus,
+            self.read_refocused,
+            self.read_all,
+            self.by_font,
+            self.people,
+            pct(self.by_font, self.people),
+            self.by_legibility,
+            self.people,
+            pct(self.by_legibility, self.people),
+            seconds.last().copied().unwrap_or(0.0),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -262,26 +400,43 @@ mod tests {
     use super::*;
 
     #[test]
-    fn wavefront_difference_is_the_rms_of_the_coefficient_differences_over_the_smaller_pupil() {
-        let person = |pupil: f64, c: &[(usize, f64)]| {
-            let mut p = sample_population(1, 3, Default::default()).remove(0);
-            p.pupil_diameter_mm = pupil;
-            p.zernike_um = vec![0.0; 15];
-            for &(j, v) in c {
-                p.zernike_um[j] = v;
-            }
-            p
+    fn wide_pupil_targets_span_three_to_seven_millimetres_and_are_known_over_seven_and_a_half() {
+        let setup = Setup {
+            targets: 20,
+            population: 0,
+            target_looks: 1,
+            hint: true,
+            wide_pupils: true,
+            documents: Documents::PinSlips,
         };
-        // Same pupil: defocus (j = 4) 0.3 against 0 and coma (j = 7) 0.1 against 0.5: √(0.3² + 0.4²) = 0.5; tilt
-        // (j = 1) is left out.
-        let a = person(5.0, &[(4, 0.3), (7, 0.1), (1, 2.0)]);
-        let b = person(5.0, &[(7, 0.5)]);
-        assert!((wavefront_difference_um(&a, &b).unwrap() - 0.5).abs() < 1e-12);
-        // Pure defocus over 6 mm seen through 4 mm: the same dioptric power, so c(2,0) scales by (4/6)², and an
-        // eye of 4 mm with that coefficient does not differ.
-        let wide = person(6.0, &[(4, 0.9)]);
-        let narrow = person(4.0, &[(4, 0.9 * (4.0f64 / 6.0).powi(2))]);
-        assert!(wavefront_difference_um(&wide, &narrow).unwrap() < 1e-12);
-        assert!((wavefront_difference_um(&wide, &person(4.0, &[])).unwrap() - 0.4).abs() < 1e-12);
+        let pupils: Vec<f64> = (0..20).map(|k| held_out_target(k, &setup).pupil_diameter_mm).collect();
+        assert!(
+            (pupils[0] - 3.1).abs() < 1e-12 && (pupils[19] - 6.9).abs() < 1e-12,
+            "{pupils:?}"
+        );
+        let t = held_out_target(0, &setup);
+        assert_eq!(t.zernike_pupil_diameter_mm, Some(7.5));
+        // Widened by 0.5 mm, the eye is still inside what was measured.
+        assert!((t.with_pupil_changed(0.5).pupil_diameter_mm - 3.6).abs() < 1e-12);
+    }
+
+    #[test]
+    fn each_document_is_read_right_by_its_own_attacker_from_the_page() {
+        let page = (56, 56);
+        for (documents, font) in [
+            (Documents::PinSlips, None),
+            (
+                Documents::InFont {
+                    font: "DejaVuSansMono.ttf".into(),
+                    lines: true,
+                },
+                Some(DocFont::load("DejaVuSansMono.ttf").expect("tests/fonts/install.sh installs DejaVu")),
+            ),
+        ] {
+            let doc = documents.draw(font.as_ref(), "48210937", page, page, true).unwrap();
+            let read = doc.attacker.read(&eyekey_core::evaluation::image_luminance(&doc.image));
+            assert!(read.correct, "{}: {read:?}", doc.text);
+            assert_eq!(read.characters, if font.is_some() { 8 } else { 4 });
+        }
     }
 }

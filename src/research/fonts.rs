@@ -250,12 +250,25 @@ pub fn draw_layout(
     grid: (u32, u32),
 ) -> Result<DrawnText> {
     let lines: Vec<String> = layout.lines.iter().map(|l| l.replace('#', pin)).collect();
+    draw_filling(font, &lines, layout.fill, width, height, grid)
+}
+
+/// `lines` drawn in `font` on a `width`×`height` document, the widest filling `fill` of its width (at most; the
+/// height may limit it), read on a `grid`-sized retinal grid; the digits are secret.
+pub fn draw_filling(
+    font: &DocFont,
+    lines: &[String],
+    fill: f64,
+    width: u32,
+    height: u32,
+    grid: (u32, u32),
+) -> Result<DrawnText> {
     let lines: Vec<&str> = lines.iter().map(String::as_str).collect();
     let widest = lines.iter().map(|l| l.chars().count()).max().unwrap_or(1);
     let size = match font {
         DocFont::Bitmap => {
             // A 5×7 glyph and a dot of spacing per character; seven dots and two of leading per line.
-            let by_width = layout.fill * width as f64 / (6 * widest) as f64;
+            let by_width = fill * width as f64 / (6 * widest) as f64;
             let by_height = 0.9 * height as f64 / (9 * lines.len()) as f64;
             by_width.min(by_height).round().max(1.0)
         }
@@ -267,7 +280,7 @@ pub fn draw_layout(
                 .fold(0.0f32, f32::max) as f64;
             let tall = (em.ascent() - em.descent()) as f64 * lines.len() as f64
                 + em.line_gap() as f64 * (lines.len() as f64 - 1.0);
-            (layout.fill * width as f64 / advance).min(0.95 * height as f64 / tall)
+            (fill * width as f64 / advance).min(0.95 * height as f64 / tall)
         }
     };
     draw_text(font, &lines, width, height, size, grid)
@@ -296,5 +309,30 @@ mod tests {
             assert_eq!(read.text, "7093", "{layout:?}: the attacker reads what is drawn");
             assert!(!read.correct);
         }
+    }
+}
+
+#[cfg(test)]
+mod domain_tests {
+    use super::*;
+
+    #[test]
+    fn the_legibility_judges_domain_starts_at_the_calibrations_smallest_characters() {
+        // The calibration's documents: every font and layout, on its 56×56 grid, one pixel per hole.
+        let mut smallest = f64::INFINITY;
+        for name in super::super::fonts::CALIBRATION_FONTS {
+            let font = DocFont::load(name).expect("tests/fonts/install.sh installs the calibration's fonts");
+            for layout in CALIBRATION_LAYOUTS {
+                let drawn = draw_layout(&font, &layout, "4821", 56, 56, (56, 56)).unwrap();
+                let h = eyekey_core::evaluation::text_height_on_grid(&drawn.document, 56).unwrap();
+                eprintln!("{name} {}: {h:.1} px", layout.name());
+                smallest = smallest.min(h);
+            }
+        }
+        assert!(
+            smallest >= eyekey_core::evaluation::MIN_JUDGED_TEXT_PX
+                && smallest < eyekey_core::evaluation::MIN_JUDGED_TEXT_PX + 1.0,
+            "the calibration's smallest characters are {smallest:.1} px tall"
+        );
     }
 }

@@ -536,6 +536,12 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
         .select_by_value(ids[1].as_str().unwrap())
         .await
         .unwrap();
+    // The one trade-off knob: strict (no target states) keeps the console's job small.
+    input_labelled(&c, "#create-job", "Security")
+        .await
+        .select_by_value("strict")
+        .await
+        .unwrap();
     c.find(Locator::XPath(
         "//form[@id='create-job']//label[contains(., 'Bob')]/input",
     ))
@@ -570,6 +576,11 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
         180,
     )
     .await;
+    assert_eq!(
+        c.find(Locator::Id("job-security")).await.unwrap().text().await.unwrap(),
+        "strict",
+        "the job page says which security level the job was asked for"
+    );
     wait_until(
         &c,
         "every view to load",

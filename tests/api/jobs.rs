@@ -395,6 +395,34 @@ async fn a_job_for_a_display_that_does_not_resolve_its_views_is_accepted_with_a_
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_uploaded_document_whose_text_is_too_small_to_judge_on_the_display_is_refused_before_it_is_queued() {
+    // "4821" in eyekey's font at one pixel per dot on a 48-pixel page: 7 pixels tall, 1.75 holes on the fixtures'
+    // 12-hole display, far below the 7 the legibility judge is calibrated from. Without a text hint nothing could
+    // say whether the target reads it: the job is refused, naming the size and what would help, and nothing runs.
+    let app = crate::helpers::spawn_app().await;
+    let mut f = app.fixtures().await;
+    let tiny = eyekey_core::imaging::glyphs::render_text(&["4821"], 48, 48, 1);
+    let mut png = Vec::new();
+    tiny.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    f.document_id = app.upload(png).await;
+    let mut body = job_body(&f);
+    body["options"]["ensure_target_reads"] = json!(true);
+    let e = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::UNPROCESSABLE_ENTITY).await;
+    assert_eq!(e["field"], "document_id", "{e}");
+    let message = e["message"].as_str().unwrap();
+    assert!(
+        message.contains("about 1.8 holes tall") && message.contains("POST /v1/documents/text"),
+        "{message}"
+    );
+    let list = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;
+    assert_eq!(list["items"].as_array().unwrap().len(), 0, "{list}");
+    // The operator who accepts a target that may not read (the guard off) is not refused.
+    body["options"]["ensure_target_reads"] = json!(false);
+    expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_job_whose_target_cannot_read_its_frames_fails_with_target_cannot_read_and_delivers_nothing() {
     // A checkerboard at the finest pitch the display's retinal grid holds, on a display that does not resolve its
     // views (M = 0.30), seen by the fixtures' myope: nothing the encoder can do shows it to the target, with the

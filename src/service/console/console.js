@@ -756,12 +756,15 @@ async function jobForm() {
       : h("p", { class: "hint" }, profiles ? "Enrol more people to name observers." : "Listing profiles needs the enrol scope."));
   const method = h("select", { "data-field": "options.method" },
     [["multiplex", "multiplex (paper Eq. 14)"], ["diffmax", "difference maximisation (Eq. 16)"], ["combined", "combined"]].map(([v, t]) => h("option", { value: v }, t)));
+  const security = h("select", { "data-field": "options.security" },
+    [["standard", "standard: the target reads while its focus and pupil drift"],
+      ["strict", "strict: fewest people read; the target must hold its focus"]].map(([v, t]) => h("option", { value: v }, t)));
   const options = h("textarea", { "data-field": "options", rows: 4, placeholder: "{\"max_iterations\": 200, \"evaluation_population\": 100}" });
   let key = newKey();
   return form({ id: "create-job", "aria-label": "Create a job" }, [
     h("h2", {}, "Create a job"),
     h("div", { class: "row" }, field("Who must read it", profile), field("Display", display), field("Document", documentSel),
-      field("Decoy shown to everybody else", decoy), field("Method", method)),
+      field("Decoy shown to everybody else", decoy), field("Method", method), field("Security", security)),
     observers,
     field("Other encoder options (JSON, optional)", options, "Every option has a default; see EncodeOptions in the API documentation."),
     h("div", { class: "actions" }, h("button", { type: "submit" }, "Create job")),
@@ -776,6 +779,7 @@ async function jobForm() {
       if (typeof opts !== "object" || Array.isArray(opts) || opts === null) throw new FormError("options", "must be a JSON object");
     }
     opts.method = method.value;
+    if (!("security" in opts)) opts.security = security.value;
     const body = {
       profile_id: profile.value.trim(),
       display_id: display.value,
@@ -826,6 +830,7 @@ async function jobPage(id) {
         h("dt", {}, "Observers"), h("dd", {}, j.observers.length ? j.observers.map((o) => who(o.profile_id, o.version)).join("; ") : "none"),
         h("dt", {}, "Display"), h("dd", { class: "mono" }, j.display_id),
         h("dt", {}, "Document"), h("dd", { class: "mono" }, j.document_id),
+        h("dt", {}, "Security"), h("dd", { id: "job-security" }, (j.options && j.options.security) || "standard"),
         h("dt", {}, "Target judged by"), h("dd", { id: "job-judge" }, j.options && j.options.document_text
           ? "the known-font attacker (the document's text is known): every secret character read right"
           : "legibility (no text hint): the target must reach the level at which a reader almost surely reads"),
@@ -878,7 +883,8 @@ async function follow(id, signal, onUpdate) {
 }
 
 /** Whether a viewer reads the document, worded for who they are: the target should, nobody else should. */
-function verdict(readable, isTarget) {
+function verdict(readable, isTarget, unknown) {
+  if (unknown) return h("span", { class: "verdict-bad" }, "unknown");
   if (isTarget) {
     return readable
       ? h("span", { class: "verdict-good" }, "reads it")
@@ -891,6 +897,9 @@ function verdict(readable, isTarget) {
 
 /** Which judge decided whether the target reads, and by how much. */
 function targetJudge(r) {
+  if (r.judge === "unknown") {
+    return `no judge: without a text hint, characters ${fmt(r.score, 1)} px tall are below the ${fmt(r.bar, 0)} px the legibility judge is calibrated from`;
+  }
   return r.judge === "known_font"
     ? `judged by the known-font attacker: margin ${fmt(r.score, 3)} (asked ${fmt(r.bar, 3)})`
     : `no text hint: judged by legibility, read from ${fmt(r.bar)}`;
@@ -925,7 +934,7 @@ async function showEvaluation(job, results, labels) {
     figures.push(h("figure", { "data-view": name },
       authImage(`/v1/jobs/${id}/views/${name}`, title),
       h("figcaption", {}, h("strong", {}, title), h("br"),
-        score ? [`legibility ${fmt(score.legibility)} · `, verdict(score.readable, isTarget), h("br"),
+        score ? [`legibility ${fmt(score.legibility)} · `, verdict(score.readable, isTarget, isTarget && report.target_reading && report.target_reading.judge === "unknown"), h("br"),
           isTarget && report.target_reading ? targetJudge(report.target_reading) : `known-font read: ${knownFont(score)}`]
           : "what the document should look like")));
   };
@@ -955,7 +964,7 @@ async function showEvaluation(job, results, labels) {
     h("section", {}, h("h2", {}, "The attackers' verdicts"),
       h("table", { id: "verdicts" },
         h("thead", {}, h("tr", {}, h("th", {}, "Viewer"), h("th", { class: "num" }, "Legibility"), h("th", {}, "Known-font attacker read"), h("th", {}, "Verdict"))),
-        h("tbody", {}, rows.map(([who, sc]) => h("tr", {}, h("td", {}, who), h("td", { class: "num" }, fmt(sc.legibility)), h("td", {}, knownFont(sc)), h("td", {}, verdict(sc.readable, sc === report.target))))))),
+        h("tbody", {}, rows.map(([who, sc]) => h("tr", {}, h("td", {}, who), h("td", { class: "num" }, fmt(sc.legibility)), h("td", {}, knownFont(sc)), h("td", {}, verdict(sc.readable, sc === report.target, sc === report.target && report.target_reading && report.target_reading.judge === "unknown"))))))),
     h("p", { class: "hint" }, `Legibility: ${report.metric}.`));
 }
 

@@ -135,7 +135,7 @@ pub async fn try_execute_next_job(state: &AppState) -> anyhow::Result<Option<(Jo
 }
 
 /// Why a load of a job's inputs failed.
-enum LoadError {
+pub(crate) enum LoadError {
     /// The job cannot run (an input was deleted, or does not fit): fail without retrying.
     Fatal(String),
     /// Something that may pass on retry (I/O).
@@ -518,7 +518,7 @@ async fn open_profile(state: &AppState, id: &str, version: i64, role: &str) -> R
     VisionProfile::from_json(&text).map_err(|e| LoadError::Fatal(format!("{role} profile {id}: {e}")))
 }
 
-async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::RgbImage, LoadError> {
+pub(crate) async fn load_image(state: &AppState, id: &str, role: &str) -> Result<image::RgbImage, LoadError> {
     let doc = store::documents::get(&state.db, id)
         .await?
         .ok_or_else(|| LoadError::Fatal(format!("the {role} document {id} was deleted")))?;

@@ -301,6 +301,20 @@ pub async fn create_job(
     }
     let warnings = resolvability_warnings(&Resolvability::of(&display));
     admit(&state.config, &display, &options, observers.len())?;
+    if options.document_text.is_none() && options.ensure_target_reads {
+        // Without a text hint only the legibility judge says whether the target reads: refuse a document it
+        // cannot judge on this display before anything is queued.
+        let document = crate::service::jobs::load_image(&state, &id_text(&body.document_id), "target")
+            .await
+            .map_err(|e| match e {
+                crate::service::jobs::LoadError::Fatal(why) => ApiError::invalid("document_id", why),
+                crate::service::jobs::LoadError::Transient(e) => ApiError::Internal(e),
+            })?;
+        eyekey_core::encoding::pipeline::check_judged_text_size(&document, &display).map_err(|e| match e {
+            PipelineError::Invalid { field: _, reason } => ApiError::invalid("document_id", reason),
+            other => ApiError::Internal(other.into()),
+        })?;
+    }
     let id = JobId::new_v4();
     let key = DataKey::generate();
     let internal = |e: crate::service::crypto::CryptoError| ApiError::Internal(e.into());

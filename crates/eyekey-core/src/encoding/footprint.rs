@@ -78,7 +78,7 @@ pub struct Footprint {
 /// The observers the encoder renders for `options` with `extra_observers` representative observers.
 pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, extra_observers: usize) -> u64 {
     let target = 1
-        + options.target_focus_d.len() as u64
+        + (options.focus_states_d().len() + options.pupil_states_mm().len()) as u64
         + if options.head_radius_mm > 0.0 {
             u64::from(options.head_positions)
         } else {

@@ -50,11 +50,40 @@ pub enum DecoyKind {
     Image,
 }
 
+/// How hard an encode hides the document, and what it asks of the target's eye in exchange: the one choice an
+/// operator makes (`security`). Each level sets the target's states (the focus and pupil changes it must read
+/// through) where `target_focus_d` and `target_pupil_mm` are left empty; the figures each level reaches on every
+/// display are measured in docs/experiments.md §0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum Security {
+    /// The target reads while its eye does what eyes do as they look: its focus drifts by ±0.25 D and its pupil
+    /// by ±0.5 mm ([`STANDARD_FOCUS_STATES_D`], [`STANDARD_PUPIL_STATES_MM`], each a stacked target term the
+    /// guard also judges). More of the people at the seat read than under `strict`.
+    #[default]
+    Standard,
+    /// The target must hold its profile's focus and pupil (no stacked states): the fewest people at the seat
+    /// read, and a target whose accommodation drifts by 0.25 D misreads.
+    Strict,
+}
+
+/// The focus states `security: standard` stacks (dioptres added to the profile's sphere): accommodation's
+/// ordinary drift while one looks at a near display.
+pub const STANDARD_FOCUS_STATES_D: [f64; 2] = [-0.25, 0.25];
+
+/// The pupil states `security: standard` stacks (mm added to the viewing pupil, within the measured one).
+pub const STANDARD_PUPIL_STATES_MM: [f64; 2] = [-0.5, 0.5];
+
 /// Options of one encode; every field has a sensible default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(default, deny_unknown_fields)]
 pub struct EncodeOptions {
+    /// How hard to hide, at what cost to the target's comfort ([`Security`]): the target states asked of it
+    /// where `target_focus_d` and `target_pupil_mm` are empty.
+    pub security: Security,
     /// The encoder.
     pub method: Method,
     /// The forward model the encoder (and the job's evaluation) uses: `wave` (diffraction at the apertures,
@@ -186,8 +215,14 @@ pub struct EncodeOptions {
     /// Focus states the target must read in too, dioptres added to its profile's sphere (an eye's accommodation
     /// drifts by about ±0.25 D while it looks): each is a stacked target term, shown the document at
     /// `target_focus_weight`, and the target guard asks the target to read in each (docs/design.md §3.1).
+    /// Empty: the `security` level's.
     pub target_focus_d: Vec<f64>,
-    /// The weight of each focus state's term, relative to the profile's own focus (1).
+    /// Pupil states the target must read in too, mm added to its viewing pupil (a pupil follows the light while
+    /// one looks); a state that would pass the pupil the aberrations were measured over stops at it (nothing is
+    /// known of the eye beyond), and one that changes nothing is dropped. Each is a stacked target term at
+    /// `target_focus_weight` that the guard judges, as the focus states are. Empty: the `security` level's.
+    pub target_pupil_mm: Vec<f64>,
+    /// The weight of each target state's term (focus and pupil), relative to the profile's own look (1).
     #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 4.0))]
     pub target_focus_weight: f64,
     /// Bystander camera rounds (0 = off): after each solve, the threat model's focus-sweeping camera (every
@@ -245,6 +280,7 @@ pub struct EncodeOptions {
 impl Default for EncodeOptions {
     fn default() -> Self {
         Self {
+            security: Security::Standard,
             method: Method::Multiplex,
             optics: Optics::Wave,
             ablation: None,
@@ -277,6 +313,7 @@ impl Default for EncodeOptions {
             head_rounds: 0,
             head_round_max_weight: HEAD_ROUND_MAX_WEIGHT,
             target_focus_d: Vec::new(),
+            target_pupil_mm: Vec::new(),
             target_focus_weight: DEFAULT_TARGET_FOCUS_WEIGHT,
             bystander_rounds: 0,
             bystander_scan_mm: DEFAULT_BYSTANDER_SCAN_MM.to_vec(),
@@ -371,6 +408,24 @@ impl EncodeOptions {
         self.decoy_weight.unwrap_or_else(|| Self::default_decoy_weight(display))
     }
 
+    /// The focus states the target must read in (dioptres): `target_focus_d`, else the `security` level's.
+    pub fn focus_states_d(&self) -> Vec<f64> {
+        match (self.target_focus_d.is_empty(), self.security) {
+            (false, _) => self.target_focus_d.clone(),
+            (true, Security::Standard) => STANDARD_FOCUS_STATES_D.to_vec(),
+            (true, Security::Strict) => Vec::new(),
+        }
+    }
+
+    /// The pupil states the target must read in (mm): `target_pupil_mm`, else the `security` level's.
+    pub fn pupil_states_mm(&self) -> Vec<f64> {
+        match (self.target_pupil_mm.is_empty(), self.security) {
+            (false, _) => self.target_pupil_mm.clone(),
+            (true, Security::Standard) => STANDARD_PUPIL_STATES_MM.to_vec(),
+            (true, Security::Strict) => Vec::new(),
+        }
+    }
+
     /// These options with `seed` set: the one given, else a fresh one from the operating system's CSPRNG.
     pub fn with_fresh_seed(mut self) -> Self {
         if self.seed.is_none() {
@@ -453,6 +508,12 @@ impl EncodeOptions {
             return bad(
                 "target_focus_d",
                 format!("at most 4 focus states within ±2 D, got {:?}", self.target_focus_d),
+            );
+        }
+        if self.target_pupil_mm.len() > 4 || self.target_pupil_mm.iter().any(|d| !(d.is_finite() && d.abs() <= 2.0)) {
+            return bad(
+                "target_pupil_mm",
+                format!("at most 4 pupil states within ±2 mm, got {:?}", self.target_pupil_mm),
             );
         }
         if !(self.target_focus_weight.is_finite() && (0.0..=4.0).contains(&self.target_focus_weight)) {

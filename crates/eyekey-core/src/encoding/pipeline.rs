@@ -564,6 +564,29 @@ fn judged(summary: &mut SolverSummary, reads: bool) {
 
 /// Checks that the job's inputs fit together; errors name the input. Returns the document text hint resolved
 /// against the document.
+/// Refuses a document whose characters land on the display's retinal grid smaller than the legibility judge was
+/// calibrated on ([`MIN_JUDGED_TEXT_PX`](crate::evaluation::MIN_JUDGED_TEXT_PX)): without a text hint that judge
+/// alone decides whether the target reads, and below its domain it calls views read that nobody reads
+/// (docs/experiments.md §0). The error names the size and what would help.
+pub fn check_judged_text_size(document: &image::RgbImage, display: &DisplayGeometry) -> Result<(), PipelineError> {
+    let min = crate::evaluation::MIN_JUDGED_TEXT_PX;
+    match crate::evaluation::text_height_on_grid(document, display.holes_y) {
+        Some(h) if h < min => Err(PipelineError::invalid(
+            "document",
+            format!(
+                "its characters would be about {h:.1} holes tall on this {}×{}-hole display, and whether the target \
+                 reads text smaller than {min:.0} holes cannot be judged without knowing it: draw the text at least \
+                 {:.1}× larger, use a display with more holes, or render it with POST /v1/documents/text (or give \
+                 its text hint) so the known-font attacker judges it",
+                display.holes_x,
+                display.holes_y,
+                min / h
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 fn validate_spec(spec: &JobSpec) -> Result<Option<crate::evaluation::DocumentText>, PipelineError> {
     spec.options.validate()?;
     let d = &spec.display;
@@ -592,6 +615,9 @@ fn validate_spec(spec: &JobSpec) -> Result<Option<crate::evaluation::DocumentTex
         Some(text) => Some(document_text(spec, text)?),
         None => None,
     };
+    if document_text.is_none() && spec.options.ensure_target_reads {
+        check_judged_text_size(&spec.document, d)?;
+    }
     if let Some(decoy) = &spec.decoy {
         if !aspect_matches(decoy, d) {
             return Err(PipelineError::invalid(
@@ -838,10 +864,9 @@ impl Cast {
             LeakPatterns::new(&spec.document, g.width, g.height, glyphs)
         });
         let moved = head_box_observers(spec, cache)?;
-        let focused = o
-            .target_focus_d
+        let focused = target_states(spec)
             .iter()
-            .map(|&dd| look_at_focus(spec, dd, &base_transport(o), cache))
+            .map(|person| look_as(spec, person, &base_transport(o), cache))
             .collect::<Result<Vec<_>, _>>()?;
         let mut cast = Self {
             focused,
@@ -1003,7 +1028,9 @@ impl Cast {
                 let reading = reference.target_reading(&score, o.target_margin);
                 let lead = match reading.judge {
                     crate::evaluation::TargetJudge::KnownFont => reading.score,
-                    crate::evaluation::TargetJudge::Legibility => reading.margin(),
+                    crate::evaluation::TargetJudge::Legibility | crate::evaluation::TargetJudge::Unknown => {
+                        reading.margin()
+                    }
                 };
                 let reads = reading.reads;
                 Ok((lead, reads))
@@ -1293,17 +1320,44 @@ fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
 
 /// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
 /// is asked for the document with weight `head_weight` (a quarter of the central weight by default).
+/// The target's states, each a stacked term the guard judges: its profile refocused by each focus state
+/// ([`EncodeOptions::focus_states_d`]), then with its pupil changed by each pupil state
+/// ([`EncodeOptions::pupil_states_mm`]), dropping a pupil state that leaves the pupil as it was (a profile
+/// measured at its viewing pupil cannot widen).
+pub fn target_states(spec: &JobSpec) -> Vec<VisionProfile> {
+    let o = &spec.options;
+    let t = &spec.target;
+    let focus = o.focus_states_d().into_iter().map(|dd| t.refocused(dd));
+    let pupil = o
+        .pupil_states_mm()
+        .into_iter()
+        .map(|dp| t.with_pupil_changed(dp))
+        .filter(|p| (p.pupil_diameter_mm - t.pupil_diameter_mm).abs() > 1e-9);
+    focus.chain(pupil).collect()
+}
+
 /// The target at the design position with `dd` dioptres added to its profile's sphere (a focus state,
 /// `target_focus_d`).
+#[cfg(test)]
 fn look_at_focus(
     spec: &JobSpec,
     dd: f64,
     topts: &TransportOptions,
     cache: &TransportCache,
 ) -> Result<Observer, PipelineError> {
+    look_as(spec, &spec.target.refocused(dd), topts, cache)
+}
+
+/// `person` (one of the target's states) at the design position.
+fn look_as(
+    spec: &JobSpec,
+    person: &VisionProfile,
+    topts: &TransportOptions,
+    cache: &TransportCache,
+) -> Result<Observer, PipelineError> {
     Observer::new(
         &spec.display,
-        &spec.target.refocused(dd),
+        person,
         EyePosition::default(),
         topts,
         spec.options.optics,
@@ -1874,6 +1928,51 @@ mod tests {
     }
 
     #[test]
+    fn the_security_level_sets_the_target_states_and_explicit_states_replace_them() {
+        let mut spec = pin_job(pin_hint());
+        // Measured over 7.5 mm, viewing through 5: standard asks ±0.25 D and ±0.5 mm, four states.
+        spec.target = VisionProfile {
+            pupil_diameter_mm: 5.0,
+            zernike_pupil_diameter_mm: Some(7.5),
+            ..VisionProfile::perfect()
+        };
+        let pupils = |spec: &JobSpec| -> Vec<f64> { target_states(spec).iter().map(|p| p.pupil_diameter_mm).collect() };
+        let spheres = |spec: &JobSpec| -> Vec<f64> {
+            target_states(spec)
+                .iter()
+                .map(|p| p.prescription.map_or(0.0, |p| p.sphere_d))
+                .collect()
+        };
+        assert_eq!(spec.options.security, Security::Standard);
+        assert_eq!(pupils(&spec), [5.0, 5.0, 4.5, 5.5]);
+        assert_eq!(spheres(&spec), [-0.25, 0.25, 0.0, 0.0]);
+        // Measured at the viewing pupil: the eye cannot be widened, so that state is dropped.
+        spec.target = VisionProfile {
+            pupil_diameter_mm: 6.0,
+            ..VisionProfile::perfect()
+        };
+        assert_eq!(pupils(&spec), [6.0, 6.0, 5.5]);
+        spec.options.security = Security::Strict;
+        assert!(target_states(&spec).is_empty());
+        spec.options.target_focus_d = vec![1.0];
+        assert_eq!(spheres(&spec), [1.0]);
+        // The footprint counts every state the level asks for (an upper bound where one is dropped).
+        spec.options = EncodeOptions::default();
+        assert_eq!(
+            super::super::footprint::encoder_observers(&spec.display, &spec.options, 0)
+                - super::super::footprint::encoder_observers(
+                    &spec.display,
+                    &EncodeOptions {
+                        security: Security::Strict,
+                        ..EncodeOptions::default()
+                    },
+                    0
+                ),
+            4
+        );
+    }
+
+    #[test]
     fn a_focus_state_is_a_target_term_the_guard_judges_too() {
         // The perfect eye refocused by +1 D sees the plain solve's PIN blurred (legibility 0.91); asked to read in
         // that focus state too, the solve pre-compensates for it (1.00), and the encode counts one more observer.
@@ -1882,6 +1981,7 @@ mod tests {
         let mut spec = pin_job_on_lenslets();
         spec.options.max_iterations = 60;
         spec.options.optics = crate::physics::observer::Optics::Wave;
+        spec.options.security = Security::Strict;
         let plain = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         spec.options.target_focus_d = vec![1.0];
         spec.options.target_focus_weight = 1.0;

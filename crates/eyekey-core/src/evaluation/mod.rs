@@ -19,6 +19,7 @@ mod metrics;
 mod options;
 mod reference;
 mod report;
+mod text_size;
 
 use attackers::*;
 pub use bystanders::{guesses_to_read, unwarp, BystanderOptions, BystanderPosition, BystanderSummary};
@@ -29,6 +30,7 @@ pub use metrics::*;
 pub use options::EvaluationOptions;
 pub use reference::Reference;
 pub use report::*;
+pub use text_size::{text_height_on_grid, MIN_JUDGED_TEXT_PX};
 
 use std::sync::atomic::{AtomicBool, Ordering};
 

@@ -2,7 +2,7 @@
 
 use crate::evaluation::{
     denoised, image_luminance, ink_box, legibility_of_denoised, luminance, ncc, psnr, ssim, TargetJudge, TargetReading,
-    ViewScore, INK_MARGIN, READS_THRESHOLD,
+    ViewScore, INK_MARGIN, MIN_JUDGED_TEXT_PX, READS_THRESHOLD,
 };
 use crate::imaging;
 use crate::physics::observer::Observer;
@@ -24,11 +24,15 @@ pub struct Reference {
     pub known_font: Option<crate::evaluation::KnownFontAttacker>,
     /// The box around the document's ink where legibility is measured (x0, y0, x1, y1).
     pub ink_box: (usize, usize, usize, usize),
+    /// How tall the document's characters are on the grid ([`text_height_on_grid`](crate::evaluation::text_height_on_grid)):
+    /// the legibility judge's domain.
+    pub text_height: Option<f64>,
 }
 
 impl Reference {
     /// From an sRGB document resized to the retinal grid.
     pub fn new(document: &RgbImage, width: u32, height: u32, level: f64, threshold: f64) -> Self {
+        let text_height = crate::evaluation::text_height_on_grid(document, height);
         let resized = imaging::resize(document, width, height);
         let document = image_luminance(&resized);
         let ink_box = ink_box(&document, width as usize, height as usize, INK_MARGIN);
@@ -40,6 +44,7 @@ impl Reference {
             threshold,
             known_font: None,
             ink_box,
+            text_height,
         }
     }
 
@@ -90,11 +95,21 @@ impl Reference {
                 score: k.margin,
                 bar: margin,
             },
-            None => TargetReading {
-                judge: TargetJudge::Legibility,
-                reads: score.legibility >= READS_THRESHOLD,
-                score: score.legibility,
-                bar: READS_THRESHOLD,
+            // Characters smaller than any the reads bar was calibrated on: no judge is right here, and the
+            // verdict is never "reads".
+            None => match self.text_height {
+                Some(h) if h < MIN_JUDGED_TEXT_PX => TargetReading {
+                    judge: TargetJudge::Unknown,
+                    reads: false,
+                    score: h,
+                    bar: MIN_JUDGED_TEXT_PX,
+                },
+                _ => TargetReading {
+                    judge: TargetJudge::Legibility,
+                    reads: score.legibility >= READS_THRESHOLD,
+                    score: score.legibility,
+                    bar: READS_THRESHOLD,
+                },
             },
         }
     }

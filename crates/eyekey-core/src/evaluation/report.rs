@@ -38,6 +38,11 @@ pub enum TargetJudge {
     /// Legibility (nothing known of the text): at least [`READS_THRESHOLD`](crate::evaluation::READS_THRESHOLD),
     /// the level at which the known-font attacker reads 99 % of calibration views.
     Legibility,
+    /// No judge is right on this document: nothing is known of its text, and its characters land on the retina
+    /// smaller than any the legibility judge was calibrated on
+    /// ([`MIN_JUDGED_TEXT_PX`](crate::evaluation::MIN_JUDGED_TEXT_PX)); `score` is their height in pixels, and the
+    /// target is never said to read.
+    Unknown,
 }
 
 /// Whether the target reads its view, which judge decided, and by how much.
@@ -63,7 +68,11 @@ impl TargetReading {
 
     /// The verdict with its evidence, for people: "reads it (known-font attacker: margin 0.112, asked 0.000)".
     pub fn describe(&self) -> String {
-        let verdict = if self.reads { "reads it" } else { "does not read it" };
+        let verdict = match (self.judge, self.reads) {
+            (TargetJudge::Unknown, _) => "may or may not read it",
+            (_, true) => "reads it",
+            (_, false) => "does not read it",
+        };
         format!("{verdict} ({})", self.evidence())
     }
 
@@ -73,6 +82,11 @@ impl TargetReading {
         match self.judge {
             TargetJudge::KnownFont => format!("known-font attacker: margin {:.3}, asked {:.3}", self.score, self.bar),
             TargetJudge::Legibility => format!("no text hint: legibility {:.2}, read from {:.2}", self.score, self.bar),
+            TargetJudge::Unknown => format!(
+                "unknown: no text hint, and characters {:.1} px tall on the retina, below the {:.0} px the judge is \
+                 calibrated from",
+                self.score, self.bar
+            ),
         }
     }
 }

@@ -94,6 +94,22 @@ pub fn sample_person<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope) -> Visi
         6.0
     };
     let table_pupil = if pupil > 6.0 { 7.5 } else { 6.0 };
+    let z = draw_wavefront(rng, scope, table_pupil);
+    let z = z.rescaled(pupil).expect("rescaling to a smaller pupil");
+    person(rng, scope, pupil, z.coefficients_um, None)
+}
+
+/// Draws one person viewing through a pupil of `pupil_mm` (2–7.5 mm), whose aberrations are stated as an
+/// aberrometer measures them, over the table's 7.5 mm pupil (`zernike_pupil_diameter_mm`): the eye is then
+/// known out to 7.5 mm whatever its viewing pupil, and [`VisionProfile::with_pupil_changed`] may widen it. The
+/// held-out targets of `eyekey experiment defaults`, whose pupils span 3–7 mm.
+pub fn sample_person_with_pupil<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope, pupil_mm: f64) -> VisionProfile {
+    let z = draw_wavefront(rng, scope, 7.5);
+    person(rng, scope, pupil_mm.clamp(2.0, 7.5), z.coefficients_um, Some(7.5))
+}
+
+/// One eye's coefficients drawn from the Indiana statistics at `table_pupil` (6 or 7.5 mm), stated for it.
+fn draw_wavefront<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope, table_pupil: f64) -> ZernikeCoefficients {
     let mut c = vec![0.0; 28];
     for t in indiana_stats(table_pupil) {
         let (n, _) = crate::physics::zernike::osa_nm(t.j);
@@ -106,8 +122,17 @@ pub fn sample_person<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope) -> Visi
             c[t.j] = Normal::new(t.mean_um, t.sd_um).expect("finite positive SD").sample(rng);
         }
     }
-    let z = ZernikeCoefficients::new(table_pupil, c).expect("sampled coefficients are in range");
-    let z = z.rescaled(pupil).expect("rescaling to a smaller pupil");
+    ZernikeCoefficients::new(table_pupil, c).expect("sampled coefficients are in range")
+}
+
+/// The person with these optics, their cones drawn next from `rng` when `scope` asks.
+fn person<R: Rng + ?Sized>(
+    rng: &mut R,
+    scope: SamplingScope,
+    pupil: f64,
+    zernike_um: Vec<f64>,
+    zernike_pupil_diameter_mm: Option<f64>,
+) -> VisionProfile {
     let spectral = if scope.spectral {
         SpectralSensitivity::Parameters(sample_observer_parameters(rng))
     } else {
@@ -115,8 +140,8 @@ pub fn sample_person<R: Rng + ?Sized>(rng: &mut R, scope: SamplingScope) -> Visi
     };
     VisionProfile {
         pupil_diameter_mm: pupil,
-        zernike_um: z.coefficients_um,
-        zernike_pupil_diameter_mm: None,
+        zernike_um,
+        zernike_pupil_diameter_mm,
         prescription: None,
         spectral,
         reference_wavelength_nm: None,

@@ -175,6 +175,19 @@ impl VisionProfile {
         }
     }
 
+    /// The same eye with its viewing pupil `dp` mm wider (narrower when negative), as a pupil follows the light
+    /// while one looks: the coefficients stay stated for the pupil they were measured at and are rescaled to the
+    /// new one (ISO 24157 Annex B). Nothing is known of the eye outside the measured pupil, so the pupil grows at
+    /// most to it (and shrinks at least to 2 mm, the profile's lower bound).
+    pub fn with_pupil_changed(&self, dp: f64) -> Self {
+        let measured = self.zernike_pupil_diameter_mm.unwrap_or(self.pupil_diameter_mm);
+        Self {
+            pupil_diameter_mm: (self.pupil_diameter_mm + dp).clamp(2.0, measured.max(2.0)),
+            zernike_pupil_diameter_mm: Some(measured),
+            ..self.clone()
+        }
+    }
+
     /// The wavefront the display meets: coefficients rescaled to the viewing pupil (ISO 24157 Annex B), with
     /// the prescription's defocus and astigmatism added, piston and tilt removed (tilt only shifts the
     /// whole retinal image).
@@ -287,5 +300,22 @@ mod tests {
         let refocused = VisionProfile::perfect().refocused(-2.0).effective_wavefront().unwrap();
         assert!((refocused.get(4) - 2.598).abs() < 1e-3, "{}", refocused.get(4));
         assert!(p.refocused(2.0).effective_wavefront().unwrap().get(4).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_changed_pupil_rescales_the_measured_wavefront_and_never_grows_past_it() {
+        // Pure defocus measured over 6 mm seen through 5 mm: the same dioptric power, so c(2,0) scales by (5/6)²
+        // (ISO 24157 Annex B, the closed form for defocus alone).
+        let mut p = VisionProfile::perfect();
+        p.zernike_um = vec![0.0, 0.0, 0.0, 0.0, 0.9];
+        let narrower = p.with_pupil_changed(-1.0);
+        assert_eq!(narrower.pupil_diameter_mm, 5.0);
+        let c4 = narrower.effective_wavefront().unwrap().get(4);
+        assert!((c4 - 0.9 * (5.0f64 / 6.0).powi(2)).abs() < 1e-12, "{c4}");
+        // Back out to the measured pupil, the wavefront is the measured one; beyond it, the eye is not known.
+        assert!((narrower.with_pupil_changed(0.5).pupil_diameter_mm - 5.5).abs() < 1e-12);
+        assert_eq!(narrower.with_pupil_changed(3.0).pupil_diameter_mm, 6.0);
+        assert!((narrower.with_pupil_changed(1.0).effective_wavefront().unwrap().get(4) - 0.9).abs() < 1e-12);
+        assert_eq!(p.with_pupil_changed(-9.0).pupil_diameter_mm, 2.0);
     }
 }
