@@ -329,9 +329,9 @@ mod domain_tests {
                 smallest = smallest.min(h);
             }
         }
+        let min = eyekey_core::evaluation::MIN_JUDGED_TEXT_PX;
         assert!(
-            smallest >= eyekey_core::evaluation::MIN_JUDGED_TEXT_PX
-                && smallest < eyekey_core::evaluation::MIN_JUDGED_TEXT_PX + 1.0,
+            (min..min + 1.0).contains(&smallest),
             "the calibration's smallest characters are {smallest:.1} px tall"
         );
     }

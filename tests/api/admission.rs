@@ -92,7 +92,7 @@ async fn a_job_over_the_memory_limit_is_refused_with_its_estimate_and_nothing_is
     let error: serde_json::Value = r.json().await.unwrap();
     let message = error["error"]["message"].as_str().unwrap();
     assert!(
-        message.contains("limits of 128 MiB") && message.contains("65 observers"),
+        message.contains("limits of 128 MiB") && message.contains("69 observers"),
         "{message}"
     );
     let jobs = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;

@@ -409,8 +409,8 @@ async fn an_uploaded_document_whose_text_is_too_small_to_judge_on_the_display_is
     let mut body = job_body(&f);
     body["options"]["ensure_target_reads"] = json!(true);
     let e = expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::UNPROCESSABLE_ENTITY).await;
-    assert_eq!(e["field"], "document_id", "{e}");
-    let message = e["message"].as_str().unwrap();
+    assert_eq!(e["error"]["field"], "document_id", "{e}");
+    let message = e["error"]["message"].as_str().unwrap();
     assert!(
         message.contains("about 1.8 holes tall") && message.contains("POST /v1/documents/text"),
         "{message}"

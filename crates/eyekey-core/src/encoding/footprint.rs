@@ -217,6 +217,7 @@ pub fn cheapest(display: &DisplayGeometry) -> Footprint {
         near_pupil_decoys: 0,
         evaluation_population: 0,
         max_iterations: 1,
+        security: super::options::Security::Strict,
         ..Default::default()
     };
     let mut f = footprint(display, &options, 0);
@@ -230,51 +231,56 @@ mod tests {
 
     #[test]
     fn the_paper_preset_by_hand() {
-        // 100×100 holes, 5×5 views, 4 bands: D = 10⁶. Defaults: the target, 6 population decoys and 6
-        // near-pupil decoys, K = 13.
+        // 100×100 holes, 5×5 views, 4 bands: D = 10⁶. Defaults but `strict` (no target states): the target, 6
+        // population decoys and 6 near-pupil decoys, K = 13; `standard`'s four states make it 17.
         let d = DisplayGeometry::paper();
-        let f = footprint(&d, &EncodeOptions::default(), 0);
+        let base = EncodeOptions {
+            security: crate::encoding::options::Security::Strict,
+            ..EncodeOptions::default()
+        };
+        assert_eq!(footprint(&d, &EncodeOptions::default(), 0).observers, 17);
+        let f = footprint(&d, &base, 0);
         assert_eq!((f.unknowns, f.observers), (1_000_000, 13));
         // Under geometric optics no spectra and no ray bundles.
         let geometric = EncodeOptions {
             optics: Optics::Geometric,
-            ..Default::default()
+            ..base.clone()
         };
         assert_eq!(
             footprint(&d, &geometric, 0).peak_bytes,
             (32 << 20) + 1_000_000 * (72 + 4 * 13)
         );
         // Under wave optics each observer's spectra: 25 views × 4 bands × (100 + 2·10)² padded pixels × 12 bytes.
-        assert_eq!(spectra_bytes(&d, &EncodeOptions::default()), 17_280_000);
+        assert_eq!(spectra_bytes(&d, &base), 17_280_000);
         assert_eq!(
             f.peak_bytes,
-            (32 << 20) + 1_000_000 * (72 + 4 * 13) + 13 * 17_280_000 + bundle_bytes(&d, &EncodeOptions::default(), 13)
+            (32 << 20) + 1_000_000 * (72 + 4 * 13) + 13 * 17_280_000 + bundle_bytes(&d, &base, 13)
         );
         let seconds = 1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Two representative observers and a 1 mm head ring of 4 positions add 6 observers.
         let o = EncodeOptions {
             head_radius_mm: 1.0,
-            ..Default::default()
+            ..base.clone()
         };
         assert_eq!(footprint(&d, &o, 2).observers, 13 + 2 + 4);
         // Camera decoys: one per focus setting and band.
         let o = EncodeOptions {
             camera_decoys: true,
-            ..Default::default()
+            ..base.clone()
         };
         assert_eq!(footprint(&d, &o, 0).observers, 13 + 2 * 4);
         // The near-pupil decoys looked at again on a ring beside the seat: 6 more.
         let o = EncodeOptions {
             near_pupil_ring_mm: 0.8,
-            ..Default::default()
+            ..base.clone()
         };
         assert_eq!(footprint(&d, &o, 0).observers, 13 + 6);
         // A bystander round: up to 8 camera decoys, and 15 offsets × 4 directions × 27 lenses × 7 channels looked
         // through.
         let o = EncodeOptions {
             bystander_rounds: 1,
-            ..Default::default()
+            ..base.clone()
         };
         let f = footprint(&d, &o, 0);
         assert_eq!(f.observers, 13 + 8);
@@ -283,7 +289,7 @@ mod tests {
         // Two head-box rounds: up to 4 tracked positions each, and 20 ring positions looked from each.
         let o = EncodeOptions {
             head_rounds: 2,
-            ..Default::default()
+            ..base.clone()
         };
         let f = footprint(&d, &o, 0);
         assert_eq!(f.observers, 13 + 8);
@@ -294,7 +300,7 @@ mod tests {
         // (`secure` repeats every 6.4 mm at the pupil), and at most confirmed with 400 more people.
         let o = EncodeOptions {
             draws: 3,
-            ..Default::default()
+            ..base.clone()
         };
         let seconds =
             3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (621.0 + 5.0 * 189.0) * 2e-7) + 1e6 * 167.0 * 2e-7;
@@ -314,6 +320,7 @@ mod tests {
         let alone = EncodeOptions {
             population_decoys: 0,
             near_pupil_decoys: 0,
+            security: crate::encoding::options::Security::Strict,
             ..Default::default()
         };
         assert_eq!(bundle_bytes(&d, &alone, 1), (160 << 20) + 14_141_952);
@@ -376,6 +383,7 @@ mod tests {
             let o = EncodeOptions {
                 population_decoys: decoys,
                 near_pupil_decoys: 0,
+                security: crate::encoding::options::Security::Strict,
                 ..Default::default()
             };
             let model = footprint(&d, &o, 0).peak_bytes as f64;
@@ -385,9 +393,10 @@ mod tests {
                 "{holes}/{decoys}: {model} vs {measured}"
             );
         }
-        // Every preset's default encode, whole (`eyekey encode --display examples/displays/P.json --target
-        // examples/profiles/target.json --document examples/documents/pin_slip.png`, 2026-12-06): its 13
-        // observers, and the target alone (`--population-decoys 0 --near-pupil-decoys 0`). `secure` and `lenslet`
+        // Every preset's default encode under `security: strict`, whole (`eyekey encode --display
+        // examples/displays/P.json --target examples/profiles/target.json --document
+        // examples/documents/pin_slip.png --security strict`): its 13 observers, and the target alone
+        // (`--population-decoys 0 --near-pupil-decoys 0`). `secure` and `lenslet`
         // hold 84 ray bundles with the decoys (142 MiB), `pinhole` 70 (35 MiB).
         for (d, decoys_kb, alone_kb) in [
             (DisplayGeometry::secure(), 209_692u64, 88_352u64),
@@ -397,12 +406,16 @@ mod tests {
             (DisplayGeometry::small(), 31_604, 17_228),
             (DisplayGeometry::dense(), 212_384, 43_276),
         ] {
+            let strict = EncodeOptions {
+                security: crate::encoding::options::Security::Strict,
+                ..Default::default()
+            };
             let alone = EncodeOptions {
                 population_decoys: 0,
                 near_pupil_decoys: 0,
-                ..Default::default()
+                ..strict.clone()
             };
-            for (o, kb) in [(EncodeOptions::default(), decoys_kb), (alone, alone_kb)] {
+            for (o, kb) in [(strict, decoys_kb), (alone, alone_kb)] {
                 let model = footprint(&d, &o, 0).peak_bytes as f64;
                 let measured = (kb * 1024) as f64;
                 assert!(

@@ -22,7 +22,7 @@ pub fn text_height_on_grid(document: &RgbImage, grid_height: u32) -> Option<f64>
     let (lo, hi) = lum.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
         (lo.min(v), hi.max(v))
     });
-    if !(hi - lo >= 0.2) {
+    if hi - lo < 0.2 || (hi - lo).is_nan() {
         return None;
     }
     let mid = (lo + hi) / 2.0;
