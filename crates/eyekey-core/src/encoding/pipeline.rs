@@ -562,8 +562,6 @@ fn judged(summary: &mut SolverSummary, reads: bool) {
     }
 }
 
-/// Checks that the job's inputs fit together; errors name the input. Returns the document text hint resolved
-/// against the document.
 /// Refuses a document whose characters land on the display's retinal grid smaller than the legibility judge was
 /// calibrated on ([`MIN_JUDGED_TEXT_PX`](crate::evaluation::MIN_JUDGED_TEXT_PX)): without a text hint that judge
 /// alone decides whether the target reads, and below its domain it calls views read that nobody reads
@@ -587,6 +585,8 @@ pub fn check_judged_text_size(document: &image::RgbImage, display: &DisplayGeome
     }
 }
 
+/// Checks that the job's inputs fit together; errors name the input. Returns the document text hint resolved
+/// against the document.
 fn validate_spec(spec: &JobSpec) -> Result<Option<crate::evaluation::DocumentText>, PipelineError> {
     spec.options.validate()?;
     let d = &spec.display;
@@ -1318,8 +1318,6 @@ fn observer_error(field: impl Into<String>, e: ObserverError) -> PipelineError {
     }
 }
 
-/// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
-/// is asked for the document with weight `head_weight` (a quarter of the central weight by default).
 /// The target's states, each a stacked term the guard judges: its profile refocused by each focus state
 /// ([`EncodeOptions::focus_states_d`]), then with its pupil changed by each pupil state
 /// ([`EncodeOptions::pupil_states_mm`]), dropping a pupil state that leaves the pupil as it was (a profile
@@ -1366,6 +1364,8 @@ fn look_as(
     .map_err(|e| observer_error("target profile", e))
 }
 
+/// The target at `head_positions` eye positions on a ring of radius `head_radius_mm` (none when it is 0); each
+/// is asked for the document with weight `head_weight` (a quarter of the central weight by default).
 fn head_box_observers(spec: &JobSpec, cache: &TransportCache) -> Result<Vec<Observer>, PipelineError> {
     let r = spec.options.head_radius_mm;
     if r <= 0.0 {
@@ -1985,7 +1985,6 @@ mod tests {
         let mut spec = pin_job_on_lenslets();
         spec.options.max_iterations = 60;
         spec.options.optics = crate::physics::observer::Optics::Wave;
-        spec.options.security = Security::Strict;
         let plain = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         spec.options.target_focus_d = vec![1.0];
         spec.options.target_focus_weight = 1.0;

@@ -78,7 +78,7 @@ mod tests {
         let doc = crate::imaging::glyphs::render_text(&["4821"], 128, 128, 4);
         assert_eq!(text_height_on_grid(&doc, 128), Some(28.0));
         assert_eq!(text_height_on_grid(&doc, 32), Some(7.0));
-        // A blank page has no text; a single specks of two pixels is not a character.
+        // A blank page has no text; a speck of two pixels is not a character.
         let mut blank = RgbImage::from_pixel(64, 64, image::Rgb([255, 255, 255]));
         assert_eq!(text_height_on_grid(&blank, 64), None);
         blank.put_pixel(3, 3, image::Rgb([0, 0, 0]));
