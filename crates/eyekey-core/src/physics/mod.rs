@@ -4,6 +4,7 @@ pub mod chromatic;
 pub mod diffraction;
 pub mod display;
 pub mod fourier;
+pub mod mtf;
 pub mod observer;
 pub mod population;
 pub mod profile;
