@@ -320,7 +320,7 @@ fn shift_centre(u: &mut [Complex64], n: usize) {
 }
 
 /// A 2-D FFT in place: rows, then columns.
-fn fft2(u: &mut [Complex64], n: usize, fft: &dyn rustfft::Fft<f64>) {
+pub(crate) fn fft2(u: &mut [Complex64], n: usize, fft: &dyn rustfft::Fft<f64>) {
     for row in u.chunks_exact_mut(n) {
         fft.process(row);
     }

@@ -34,26 +34,11 @@ pub fn radial_mtf(wavefront: &ZernikeCoefficients, wavelength_nm: f64, samples_a
     let mut planner = FftPlanner::new();
     let forward = planner.plan_fft_forward(m);
     let inverse = planner.plan_fft_inverse(m);
-    let transform = |data: &mut [Complex64], fft: &std::sync::Arc<dyn rustfft::Fft<f64>>| {
-        for row in data.chunks_mut(m) {
-            fft.process(row);
-        }
-        let mut column = vec![Complex64::new(0.0, 0.0); m];
-        for i in 0..m {
-            for j in 0..m {
-                column[j] = data[j * m + i];
-            }
-            fft.process(&mut column);
-            for j in 0..m {
-                data[j * m + i] = column[j];
-            }
-        }
-    };
-    transform(&mut field, &forward);
+    crate::physics::fourier::fft2(&mut field, m, forward.as_ref());
     for v in field.iter_mut() {
         *v = Complex64::new(v.norm_sqr(), 0.0);
     }
-    transform(&mut field, &inverse);
+    crate::physics::fourier::fft2(&mut field, m, inverse.as_ref());
     let zero = field[0].norm();
     // Average |OTF| over directions in rings one sample of shift wide (shift k samples: frequency k·step/λ).
     let rings = n + 1;
