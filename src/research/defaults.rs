@@ -245,57 +245,21 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
                 }
                 Err(e) => return Err(e.into()),
             };
-            let l = &enc.light_field;
-            let look = |o: &Observer| -> Look {
-                let lum = luminance(&o.view(l));
-                let read = doc.attacker.read(&lum);
-                Look {
-                    reads: read.correct,
-                    margin: read.margin,
-                    legibility: reference.score("", &lum, luminance_of(o.white)).legibility,
-                }
-            };
-            // The person's looks under every kernel draw: how many read, and the worst.
-            let draws = |person: &VisionProfile| -> Result<(u32, Look)> {
-                let mut worst = Look {
-                    reads: true,
-                    margin: f64::INFINITY,
-                    legibility: f64::INFINITY,
-                };
-                let mut read = 0;
-                for j in 0..setup.target_looks.max(1) {
-                    let s = look(&view(person, j)?);
-                    read += u32::from(s.reads);
-                    worst.reads &= s.reads;
-                    worst.margin = worst.margin.min(s.margin);
-                    worst.legibility = worst.legibility.min(s.legibility);
-                }
-                Ok((read, worst))
-            };
-            let n = setup.target_looks.max(1);
-            let (at_focus, focus_worst) = draws(&target)?;
-            let (near, near_worst) = draws(&target.refocused(-0.25))?;
-            let (far, far_worst) = draws(&target.refocused(0.25))?;
-            let pupils: Vec<Look> = [-0.5, 0.5]
-                .iter()
-                .map(|&dp| view(&target.with_pupil_changed(dp), 0).map(|o| look(&o)))
-                .collect::<Result<_>>()?;
-            let people = sample_population(
-                setup.population as usize,
-                EvaluationOptions::default().seed,
-                Default::default(),
-            );
-            let (mut by_font, mut by_legibility) = (0, 0);
-            for person in &people {
-                let s = look(&view(person, 0)?);
-                by_font += u32::from(s.reads);
-                by_legibility += u32::from(s.legibility >= DEFAULT_THRESHOLD);
-            }
+            let Judged {
+                n,
+                at_focus: (at_focus, focus_worst),
+                near: (near, near_worst),
+                far: (far, far_worst),
+                pupils,
+                people,
+                by_font,
+                by_legibility,
+            } = judge(&view, &doc, &reference, &enc.light_field, &target, setup)?;
             tally.read_focus += u32::from(at_focus == n);
             tally.read_refocused += u32::from(near == n && far == n);
             tally.read_all += u32::from(at_focus == n && near == n && far == n);
             tally.margins.push(focus_worst.margin);
-            tally.people += people.len() as u32;
+            tally.people += people;
             tally.by_font += by_font;
             tally.by_legibility += by_legibility;
             let mark = |r: u32| if r == n { String::new() } else { " **misread**".into() };
@@ -314,7 +278,7 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
                 mark(far),
                 pupils[0].margin,
                 pupils[1].margin,
-                people.len(),
+                people,
             )?;
             eprintln!("{}", rows.lines().last().unwrap_or(""));
         }
@@ -323,6 +287,83 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
     let md = format!("{summary}\n{rows}");
     std::fs::write(out.join("defaults.md"), &md)?;
     Ok(md)
+}
+
+/// What the experiment measured of one encoded light field `l`.
+struct Judged {
+    /// Kernel draws per look.
+    n: u32,
+    /// The target at its focus, −0.25 D and +0.25 D: draws read, and the worst look.
+    at_focus: (u32, Look),
+    near: (u32, Look),
+    far: (u32, Look),
+    /// The target with its pupil 0.5 mm narrower and wider, one draw each.
+    pupils: [Look; 2],
+    /// Held-out people at the seat, those the known-font attacker reads, and those at legibility ≥ 0.22.
+    people: u32,
+    by_font: u32,
+    by_legibility: u32,
+}
+
+/// Judges `l` for `target` and `setup.population` held-out people at the seat, each look through `view`
+/// (a person and a kernel draw) read by `doc`'s attacker and scored against `reference`.
+fn judge(
+    view: &dyn Fn(&VisionProfile, u32) -> Result<Observer>,
+    doc: &Document,
+    reference: &Reference,
+    l: &[f32],
+    target: &VisionProfile,
+    setup: &Setup,
+) -> Result<Judged> {
+    let look = |o: &Observer| -> Look {
+        let lum = luminance(&o.view(l));
+        let read = doc.attacker.read(&lum);
+        Look {
+            reads: read.correct,
+            margin: read.margin,
+            legibility: reference.score("", &lum, luminance_of(o.white)).legibility,
+        }
+    };
+    let n = setup.target_looks.max(1);
+    // The person's looks under every kernel draw: how many read, and the worst.
+    let draws = |person: &VisionProfile| -> Result<(u32, Look)> {
+        let mut worst = Look {
+            reads: true,
+            margin: f64::INFINITY,
+            legibility: f64::INFINITY,
+        };
+        let mut read = 0;
+        for j in 0..n {
+            let s = look(&view(person, j)?);
+            read += u32::from(s.reads);
+            worst.reads &= s.reads;
+            worst.margin = worst.margin.min(s.margin);
+            worst.legibility = worst.legibility.min(s.legibility);
+        }
+        Ok((read, worst))
+    };
+    let pupil = |dp: f64| view(&target.with_pupil_changed(dp), 0).map(|o| look(&o));
+    let people = sample_population(
+        setup.population as usize,
+        EvaluationOptions::default().seed,
+        Default::default(),
+    );
+    let (mut by_font, mut by_legibility) = (0, 0);
+    for person in &people {
+        let s = look(&view(person, 0)?);
+        by_font += u32::from(s.reads);
+        by_legibility += u32::from(s.legibility >= DEFAULT_THRESHOLD);
+    }
+    Ok(Judged {
+        n,
+        at_focus: draws(target)?,
+        near: draws(&target.refocused(-0.25))?,
+        far: draws(&target.refocused(0.25))?,
+        pupils: [pupil(-0.5)?, pupil(0.5)?],
+        people: people.len() as u32,
+        by_font,
+        by_legibility,
+    })
 }
 
 /// Held-out target `k`: a person sampled with a seed no encoder or evaluation uses; with `wide_pupils`, viewing

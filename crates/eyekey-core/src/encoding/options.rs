@@ -504,17 +504,16 @@ impl EncodeOptions {
                 format!("must be within 0..=20 mm, got {}", self.camera_decoy_ring_mm),
             );
         }
-        if self.target_focus_d.len() > 4 || self.target_focus_d.iter().any(|d| !(d.is_finite() && d.abs() <= 2.0)) {
-            return bad(
-                "target_focus_d",
-                format!("at most 4 focus states within ±2 D, got {:?}", self.target_focus_d),
-            );
-        }
-        if self.target_pupil_mm.len() > 4 || self.target_pupil_mm.iter().any(|d| !(d.is_finite() && d.abs() <= 2.0)) {
-            return bad(
-                "target_pupil_mm",
-                format!("at most 4 pupil states within ±2 mm, got {:?}", self.target_pupil_mm),
-            );
+        for (field, states, what, unit) in [
+            ("target_focus_d", &self.target_focus_d, "focus", "D"),
+            ("target_pupil_mm", &self.target_pupil_mm, "pupil", "mm"),
+        ] {
+            if states.len() > 4 || states.iter().any(|d| !(d.is_finite() && d.abs() <= 2.0)) {
+                return bad(
+                    field,
+                    format!("at most 4 {what} states within ±2 {unit}, got {states:?}"),
+                );
+            }
         }
         if !(self.target_focus_weight.is_finite() && (0.0..=4.0).contains(&self.target_focus_weight)) {
             return bad(

@@ -1334,18 +1334,6 @@ pub fn target_states(spec: &JobSpec) -> Vec<VisionProfile> {
     focus.chain(pupil).collect()
 }
 
-/// The target at the design position with `dd` dioptres added to its profile's sphere (a focus state,
-/// `target_focus_d`).
-#[cfg(test)]
-fn look_at_focus(
-    spec: &JobSpec,
-    dd: f64,
-    topts: &TransportOptions,
-    cache: &TransportCache,
-) -> Result<Observer, PipelineError> {
-    look_as(spec, &spec.target.refocused(dd), topts, cache)
-}
-
 /// `person` (one of the target's states) at the design position.
 fn look_as(
     spec: &JobSpec,
@@ -1990,7 +1978,13 @@ mod tests {
         spec.options.target_focus_weight = 1.0;
         let focused = encode(&spec, &cache, &|_| {}, &cancel).unwrap();
         assert_eq!(focused.solver.observers, plain.solver.observers + 1);
-        let refocused = look_at_focus(&spec, 1.0, &base_transport(&spec.options), &cache).unwrap();
+        let refocused = look_as(
+            &spec,
+            &spec.target.refocused(1.0),
+            &base_transport(&spec.options),
+            &cache,
+        )
+        .unwrap();
         let g = refocused.grid();
         let (w, h) = spec.document.dimensions();
         let attacker = crate::evaluation::KnownFontAttacker::new(&pin_hint(), w, h, g.width, g.height).unwrap();
