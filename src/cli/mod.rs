@@ -213,6 +213,9 @@ pub enum ExperimentCommand {
         /// The decoys look through the target's pupil (`decoys_at_target_pupil`).
         #[arg(long)]
         decoys_at_target_pupil: bool,
+        /// The decoys refocus to the target's spherical equivalent (`decoys_at_target_focus`).
+        #[arg(long)]
+        decoys_at_target_focus: bool,
         /// Encode each slip as an uploaded image, without its text hint (the evaluation still reads it with the
         /// known-font attacker).
         #[arg(long)]
@@ -270,6 +273,32 @@ pub enum ExperimentCommand {
         /// (`adaptive_rounds`).
         #[arg(long)]
         adaptive_rounds: Option<u32>,
+    },
+    /// The views a learned reader trains and is tested on: PIN slips for sampled targets, each encoding with its
+    /// own fresh seed, seen by fresh people at the seat (at their own focus and refocused), beside it, by
+    /// one-band cameras and by the target (`benches/learned_reader/run.sh` trains and tests the readers).
+    ReaderViews {
+        /// Output directory (views.f32 and views.json).
+        #[arg(long)]
+        out: PathBuf,
+        /// Display preset.
+        #[arg(long, default_value = "secure")]
+        preset: String,
+        /// Encodings, each its own target, PIN and seed.
+        #[arg(long, default_value_t = 160)]
+        encodings: u32,
+        /// The first encoding's index (runs with different starts make disjoint encodings).
+        #[arg(long, default_value_t = 0)]
+        first: u32,
+        /// Fresh people per encoding.
+        #[arg(long, default_value_t = 40)]
+        people: u32,
+        /// How hard to hide (`security`).
+        #[arg(long, value_enum, default_value = "standard")]
+        security: eyekey_core::encoding::pipeline::Security,
+        /// The decoys refocus to the target's spherical equivalent (`decoys_at_target_focus`).
+        #[arg(long)]
+        decoys_at_target_focus: bool,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -774,6 +803,7 @@ pub fn run(cli: Cli) -> Result<()> {
             target_looks,
             preset,
             decoys_at_target_pupil,
+            decoys_at_target_focus,
             no_hint,
             security,
             target_focus,
@@ -794,6 +824,7 @@ pub fn run(cli: Cli) -> Result<()> {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
                 decoys_at_target_pupil,
+                decoys_at_target_focus,
                 population_decoys: decoys.unwrap_or(d.population_decoys),
                 decoy_weight: decoy_weight.or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),
@@ -822,6 +853,28 @@ pub fn run(cli: Cli) -> Result<()> {
                 documents,
             };
             print!("{}", crate::research::defaults::run(&out, &setup, &preset, options)?);
+        }
+        Command::Experiment(ExperimentCommand::ReaderViews {
+            out,
+            preset,
+            encodings,
+            first,
+            people,
+            security,
+            decoys_at_target_focus,
+        }) => {
+            let setup = crate::research::reader::Setup {
+                preset,
+                encodings,
+                people,
+                first,
+            };
+            let options = eyekey_core::encoding::pipeline::EncodeOptions {
+                security,
+                decoys_at_target_focus,
+                ..Default::default()
+            };
+            println!("{}", crate::research::reader::run(&out, &setup, options)?);
         }
         Command::Experiment(ExperimentCommand::Secure { out, population }) => {
             print!("{}", crate::research::experiment::secure(&out, population)?);
@@ -1089,16 +1142,23 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
     );
     for o in &r.observers {
         println!(
-            "{}: legibility {:.2}{}",
+            "{}: legibility {:.2}{}{}",
             o.label,
             o.legibility,
+            o.focus_d.map_or(String::new(), |f| format!(" at focus {f:+.2} D")),
             if o.readable { " (READS)" } else { "" }
         );
     }
     if let Some(p) = &r.population {
         println!(
-            "population: {}/{} can read (median legibility {:.2}, 95th percentile {:.2}, max {:.2})",
-            p.readable_count, p.count, p.median_legibility, p.p95_legibility, p.max_legibility
+            "population: {}/{} can read, {} of them at their own focus (median legibility {:.2}, 95th percentile \
+             {:.2}, max {:.2})",
+            p.readable_count,
+            p.count,
+            p.readable_at_own_focus,
+            p.median_legibility,
+            p.p95_legibility,
+            p.max_legibility
         );
     }
     if let Some(c) = &r.camera {

@@ -4,7 +4,8 @@
 //! which the encoder then holds to the reads bar of legibility), or a PIN slip or two lines of text in a font eyekey
 //! does not draw (always uploaded). The known-font attacker for the document's own font and layout reads the
 //! target's view under four kernel draws at its profile's focus and refocused by ±0.25 D, and once with its pupil
-//! 0.5 mm narrower and wider; held-out people at the target's seat say who else reads. A target whose encode fails
+//! 0.5 mm narrower and wider; held-out people at the target's seat say who else reads, at their own focus and at any
+//! focus of their accommodation range (−1 to +2 D in 0.25 D steps). A target whose encode fails
 //! (`target_cannot_read`) counts as not reading.
 
 use std::fmt::Write as _;
@@ -25,6 +26,7 @@ use eyekey_core::evaluation::{
 };
 use eyekey_core::physics::display::{DisplayGeometry, PRESETS};
 use eyekey_core::physics::observer::Observer;
+use eyekey_core::physics::accommodation::Accommodation;
 use eyekey_core::physics::population::{sample_person_with_pupil, sample_population};
 use eyekey_core::physics::profile::VisionProfile;
 use eyekey_core::physics::transport::{EyePosition, TransportCache, TransportOptions};
@@ -158,6 +160,7 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
         "+0.25 D: draws read (worst margin)",
         "pupil −0.5 / +0.5 mm: margin",
         "held-out people who read: known font; legibility ≥ 0.22",
+        "and refocusing −1 to +2 D: known font; legibility ≥ 0.22",
     ]);
     let mut summary = table_header(&[
         "display",
@@ -170,6 +173,8 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
         "worst margin at focus (range over targets)",
         "people at the seat who read: known font",
         "legibility ≥ 0.22",
+        "refocusing −1 to +2 D: known font",
+        "refocusing: legibility ≥ 0.22",
         "encode, median (max)",
     ]);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xD0C5);
@@ -237,7 +242,7 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
                     tally.failed += 1;
                     writeln!(
                         rows,
-                        "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | **{e}** | | | | | |",
+                        "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | **{e}** | | | | | | |",
                         doc.text
                     )?;
                     eprintln!("{}", rows.lines().last().unwrap_or(""));
@@ -254,6 +259,7 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
                 people,
                 by_font,
                 by_legibility,
+                refocusing,
             } = judge(&view, &doc, &reference, &enc.light_field, &target, setup)?;
             tally.read_focus += u32::from(at_focus == n);
             tally.read_refocused += u32::from(near == n && far == n);
@@ -262,10 +268,12 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
             tally.people += people;
             tally.by_font += by_font;
             tally.by_legibility += by_legibility;
+            tally.refocusing[0] += refocusing[0];
+            tally.refocusing[1] += refocusing[1];
             let mark = |r: u32| if r == n { String::new() } else { " **misread**".into() };
             writeln!(
                 rows,
-                "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | {:.3} × {:.3} | {at_focus} of {n} ({:+.3}, {:.2}){} | {near} of {n} ({:+.3}){} | {far} of {n} ({:+.3}){} | {:+.3}, {:+.3} | {by_font}; {by_legibility} of {} |",
+                "| `{name}` | {k} ({pupil:.1} mm) | {} | {seconds:.0} s | {:.3} × {:.3} | {at_focus} of {n} ({:+.3}, {:.2}){} | {near} of {n} ({:+.3}){} | {far} of {n} ({:+.3}){} | {:+.3}, {:+.3} | {by_font}; {by_legibility} of {} | {}; {} of {} |",
                 doc.text,
                 options.decoy_weight_on(&display),
                 enc.solver.decoy_weight_scale,
@@ -278,6 +286,9 @@ pub fn run(out: &Path, setup: &Setup, only: &[String], options: EncodeOptions) -
                 mark(far),
                 pupils[0].margin,
                 pupils[1].margin,
+                people,
+                refocusing[0],
+                refocusing[1],
                 people,
             )?;
             eprintln!("{}", rows.lines().last().unwrap_or(""));
@@ -303,6 +314,9 @@ struct Judged {
     people: u32,
     by_font: u32,
     by_legibility: u32,
+    /// Of the people, those the known-font attacker reads, and those at legibility ≥ 0.22, at some focus of
+    /// their accommodation range ([`Accommodation::default`]).
+    refocusing: [u32; 2],
 }
 
 /// Judges `l` for `target` and `setup.population` held-out people at the seat, each look through `view`
@@ -348,11 +362,25 @@ fn judge(
         EvaluationOptions::default().seed,
         Default::default(),
     );
-    let (mut by_font, mut by_legibility) = (0, 0);
+    let (mut by_font, mut by_legibility, mut refocusing) = (0, 0, [0, 0]);
+    let range = Accommodation::default();
     for person in &people {
-        let s = look(&view(person, 0)?);
-        by_font += u32::from(s.reads);
-        by_legibility += u32::from(s.legibility >= DEFAULT_THRESHOLD);
+        // Own focus first (the range's first state), then every other focus until both judges have read.
+        let mut any = [false, false];
+        for a in range.states(person) {
+            let s = look(&view(&Accommodation::accommodated(person, a), 0)?);
+            let read = [s.reads, s.legibility >= DEFAULT_THRESHOLD];
+            if a == 0.0 {
+                by_font += u32::from(read[0]);
+                by_legibility += u32::from(read[1]);
+            }
+            any = [any[0] || read[0], any[1] || read[1]];
+            if any == [true, true] {
+                break;
+            }
+        }
+        refocusing[0] += u32::from(any[0]);
+        refocusing[1] += u32::from(any[1]);
     }
     Ok(Judged {
         n,
@@ -363,6 +391,7 @@ fn judge(
         people: people.len() as u32,
         by_font,
         by_legibility,
+        refocusing,
     })
 }
 
@@ -392,6 +421,7 @@ struct Tally {
     people: u32,
     by_font: u32,
     by_legibility: u32,
+    refocusing: [u32; 2],
 }
 
 impl Tally {
@@ -417,7 +447,7 @@ impl Tally {
             String::new()
         };
         format!(
-            "| `{display}` | {document} | {} | {n} ({plo:.1}–{phi:.1} mm) | {} of {n}{failed} | {} of {n} | {} of {n} | {margins} | {} of {} ({:.1} %) | {} of {} ({:.1} %) | {median:.0} s ({:.0} s) |",
+            "| `{display}` | {document} | {} | {n} ({plo:.1}–{phi:.1} mm) | {} of {n}{failed} | {} of {n} | {} of {n} | {margins} | {} of {} ({:.1} %) | {} of {} ({:.1} %) | {} of {} ({:.1} %) | {} of {} ({:.1} %) | {median:.0} s ({:.0} s) |",
             match options.draws {
                 1 => format!("{:?}", options.security).to_lowercase(),
                 n => format!("{:?}, best of {n} draws", options.security).to_lowercase(),
@@ -431,6 +461,12 @@ impl Tally {
             self.by_legibility,
             self.people,
             pct(self.by_legibility, self.people),
+            self.refocusing[0],
+            self.people,
+            pct(self.refocusing[0], self.people),
+            self.refocusing[1],
+            self.people,
+            pct(self.refocusing[1], self.people),
             seconds.last().copied().unwrap_or(0.0),
         )
     }

@@ -8,6 +8,7 @@ pub mod defaults;
 pub mod encoders;
 pub mod experiment;
 pub mod fonts;
+pub mod reader;
 pub mod scale;
 pub mod wave;
 

@@ -614,7 +614,18 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     );
     let verdicts = c.find_all(Locator::Css("#verdicts tbody tr")).await.unwrap();
     assert!(verdicts.len() >= 4, "target, bystander, most legible person and camera");
-    assert!(text_of(&c, "#verdicts").await.contains("Bystander Bob"));
+    let verdict_table = text_of(&c, "#verdicts").await;
+    assert!(verdict_table.contains("Bystander Bob"));
+    // Bob may refocus: his row says at which focus he was judged (his own, or so many dioptres nearer or farther).
+    let bob = verdict_table.lines().find(|l| l.contains("Bystander Bob")).unwrap().to_string();
+    assert!(
+        bob.contains("own focus") || bob.contains(" D (nearer)") || bob.contains(" D (farther)"),
+        "{bob}"
+    );
+    assert!(
+        text_of(&c, "#population-summary").await.contains("at their own focus"),
+        "the population summary tells readers at their own focus from those who refocused"
+    );
     wait_until(
         &c,
         "the job's audit log",

@@ -957,15 +957,22 @@ async function showEvaluation(job, results, labels) {
   put(results, 
     h("section", {}, h("h2", {}, "What each viewer sees"), h("div", { class: "views", id: "views" }, figures)),
     p ? h("section", {}, h("h2", {}, "Who else can read it"),
-      h("p", { id: "population-summary" }, `${p.readable_count} of ${p.count} sampled people read it (${fmt(100 * p.readable_fraction, 1)} %, 95 % interval ${fmt(100 * p.readable_ci95[0], 1)}–${fmt(100 * p.readable_ci95[1], 1)} %); ${typeof p.known_font_readers === "number" ? ` the known-font attacker read it for ${p.known_font_readers};` : ""} median legibility ${fmt(p.median_legibility)}, 95th percentile ${fmt(p.p95_legibility)}, highest ${fmt(p.max_legibility)}. ${report.target.known_font
+      h("p", { id: "population-summary" }, `${p.readable_count} of ${p.count} sampled people read it (${fmt(100 * p.readable_fraction, 1)} %, 95 % interval ${fmt(100 * p.readable_ci95[0], 1)}–${fmt(100 * p.readable_ci95[1], 1)} %), ${p.readable_at_own_focus ?? 0} of them at their own focus and the others after refocusing; ${typeof p.known_font_readers === "number" ? ` the known-font attacker read it for ${p.known_font_readers};` : ""} median legibility ${fmt(p.median_legibility)}, 95th percentile ${fmt(p.p95_legibility)}, highest ${fmt(p.max_legibility)}. ${report.target.known_font
         ? "A viewer reads it when the known-font attacker reads every secret character from their view; legibility is shown for reference."
         : `Somebody might read it from legibility ${fmt(report.threshold)} (the job gave no text hint, so the known-font attacker did not run); the target must reach ${report.target_reading ? fmt(report.target_reading.bar) : "—"} to read it.`}`),
       populationPlot(people, report.threshold, report.target.legibility)) : null,
     h("section", {}, h("h2", {}, "The attackers' verdicts"),
       h("table", { id: "verdicts" },
-        h("thead", {}, h("tr", {}, h("th", {}, "Viewer"), h("th", { class: "num" }, "Legibility"), h("th", {}, "Known-font attacker read"), h("th", {}, "Verdict"))),
-        h("tbody", {}, rows.map(([who, sc]) => h("tr", {}, h("td", {}, who), h("td", { class: "num" }, fmt(sc.legibility)), h("td", {}, knownFont(sc)), h("td", {}, verdict(sc.readable, sc === report.target, sc === report.target && report.target_reading && report.target_reading.judge === "unknown"))))))),
+        h("thead", {}, h("tr", {}, h("th", {}, "Viewer"), h("th", { class: "num" }, "Legibility"), h("th", {}, "Known-font attacker read"), h("th", {}, "Focus"), h("th", {}, "Verdict"))),
+        h("tbody", {}, rows.map(([who, sc]) => h("tr", {}, h("td", {}, who), h("td", { class: "num" }, fmt(sc.legibility)), h("td", {}, knownFont(sc)), h("td", {}, focusOf(sc)), h("td", {}, verdict(sc.readable, sc === report.target, sc === report.target && report.target_reading && report.target_reading.judge === "unknown"))))))),
     h("p", { class: "hint" }, `Legibility: ${report.metric}.`));
+}
+
+/** At which focus a viewer who may refocus was judged: "own focus", "+1.25 D" (nearer) or "—" (not refocusing). */
+function focusOf(score) {
+  if (typeof score.focus_d !== "number") return "—";
+  if (score.focus_d === 0) return "own focus";
+  return `${score.focus_d > 0 ? "+" : "−"}${fmt(Math.abs(score.focus_d), 2)} D (${score.focus_d > 0 ? "nearer" : "farther"})`;
 }
 
 /** A histogram of the sampled people's legibility with the threshold and the target marked. */

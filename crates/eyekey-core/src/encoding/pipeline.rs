@@ -16,6 +16,7 @@ use crate::evaluation::attackers::{camera_channels, camera_lens, camera_rgb, hea
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
+use crate::physics::accommodation::Accommodation;
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
@@ -905,10 +906,13 @@ impl Cast {
         let o = &spec.options;
         let mut people = spec.observers.clone();
         people.extend(population_decoys(spec)?);
-        let near = near_pupil_decoys(
-            spec.target.pupil_diameter_mm,
-            o.near_pupil_decoys,
-            o.drawn_seed().wrapping_add(2),
+        let near = at_target_focus(
+            spec,
+            near_pupil_decoys(
+                spec.target.pupil_diameter_mm,
+                o.near_pupil_decoys,
+                o.drawn_seed().wrapping_add(2),
+            )?,
         )?;
         // Everybody at the target's position, then the near-pupil decoys again beside it (`near_pupil_ring_mm`).
         let mut looks: Vec<(VisionProfile, EyePosition)> = people
@@ -1246,11 +1250,30 @@ fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>,
         near,
         seed.wrapping_add(500),
     )?);
-    Ok(candidates)
+    at_target_focus(spec, candidates)
+}
+
+/// With `decoys_at_target_focus`, each of `people` accommodated to the focus nearest the target's
+/// ([`Accommodation::matching`]); otherwise `people` as they are.
+fn at_target_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<VisionProfile>, PipelineError> {
+    if !spec.options.decoys_at_target_focus {
+        return Ok(people);
+    }
+    let range = Accommodation::default();
+    people
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            range
+                .matching(p, &spec.target)
+                .map(|(eye, _)| eye)
+                .map_err(|e| PipelineError::invalid(format!("decoys[{k}]"), e.to_string()))
+        })
+        .collect()
 }
 
 /// The decoys a job samples from the population (`population_decoys` of them, from the job's seed; at the target's
-/// pupil with `decoys_at_target_pupil`).
+/// pupil with `decoys_at_target_pupil`, at its focus with `decoys_at_target_focus`).
 fn population_decoys(spec: &JobSpec) -> Result<Vec<VisionProfile>, PipelineError> {
     let o = &spec.options;
     let mut sampled = sample_population(
@@ -1263,7 +1286,7 @@ fn population_decoys(spec: &JobSpec) -> Result<Vec<VisionProfile>, PipelineError
             *p = at_pupil(p, spec.target.pupil_diameter_mm)?;
         }
     }
-    Ok(sampled)
+    at_target_focus(spec, sampled)
 }
 
 /// `n` decoys whose pupils bracket the target's `pupil_mm`, evenly from 0.3 mm narrower to 0.7 mm wider (one:

@@ -86,6 +86,7 @@ mod tests {
             legibility,
             ncc: 0.0,
             psnr_db: 0.0,
+            focus_d: None,
             ssim: 0.0,
             known_font: None,
             readable: legibility >= 0.5,

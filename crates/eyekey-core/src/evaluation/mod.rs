@@ -7,6 +7,10 @@
 //! threshold is calibrated against the known-font attacker (`docs/legibility-calibration.md`). Fidelity is PSNR
 //! and SSIM (Wang et al. 2004) against the objective.
 //!
+//! People may refocus: every sampled person, bystander and named observer is judged over their accommodation
+//! range (`EvaluationOptions::accommodation`, by default −1 to +2 D around the profile's focus in 0.25 D steps,
+//! narrowed with age) and reads when any focus reads; the view's `focus_d` says at which.
+//!
 //! Every simulated view here uses a sub-ray jitter seed different from the encoder's, so an encoding cannot
 //! look good merely by fitting the sampling pattern of its own transport operator.
 
@@ -38,6 +42,7 @@ use rayon::prelude::*;
 
 use image::{Rgb, RgbImage};
 
+use crate::physics::accommodation::Accommodation;
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::{transports, Lens, Observer};
 use crate::physics::population::{sample_population, SamplingScope};
@@ -170,13 +175,42 @@ impl Evaluator<'_> {
         )?)
     }
 
-    /// The given observers' scores (and a picture each).
+    /// `profile` at `eye` judged over its accommodation range (`options.accommodation`), its own focus first and
+    /// then ever farther from it: the first focus whose view `judge` says reads, else the most legible, with
+    /// [`ViewScore::focus_d`] saying which (set only when the range holds more than the own focus). `judge`
+    /// scores an observer's view and hands back what the caller keeps of it.
+    fn accommodating<T>(
+        &self,
+        profile: &VisionProfile,
+        eye: EyePosition,
+        judge: &dyn Fn(&Observer) -> (ViewScore, T),
+    ) -> Result<(ViewScore, T), EvaluationError> {
+        let states = self.options.accommodation.states(profile);
+        let mut best: Option<(ViewScore, T)> = None;
+        for &a in &states {
+            self.check()?;
+            let o = self.observer(&Accommodation::accommodated(profile, a), eye)?;
+            let (mut s, kept) = judge(&o);
+            if states.len() > 1 {
+                s.focus_d = Some(a);
+            }
+            if s.readable {
+                return Ok((s, kept));
+            }
+            if best.as_ref().is_none_or(|(b, _)| s.legibility > b.legibility) {
+                best = Some((s, kept));
+            }
+        }
+        Ok(best.expect("the own focus is always judged"))
+    }
+
+    /// The given observers' scores (and a picture each), each over their accommodation range.
     fn observers(&mut self, observers: &[(String, VisionProfile)]) -> Result<Vec<ViewScore>, EvaluationError> {
         let mut scores = Vec::new();
         for (k, (label, p)) in observers.iter().enumerate() {
-            self.check()?;
-            let o = self.observer(p, EyePosition::default())?;
-            let (s, pic) = self.reference.score_observer(label, &o, self.l);
+            let (s, pic) = self.accommodating(p, EyePosition::default(), &|o| {
+                self.reference.score_observer(label, o, self.l)
+            })?;
             scores.push(s);
             self.pictures.push((format!("observer_{k}.png"), pic));
         }
@@ -184,7 +218,7 @@ impl Evaluator<'_> {
     }
 
     /// People sampled from published statistics, each at the design eye position (the worst case: a
-    /// bystander who takes the target's seat). Keeps the first views asked for and the most legible one.
+    /// bystander who takes the target's seat) and over their accommodation range. Keeps the first views asked for and the most legible one.
     fn population(&mut self, progress: &dyn Fn(f64)) -> Result<Option<PopulationSummary>, EvaluationError> {
         let options = self.options;
         if options.population == 0 {
@@ -204,10 +238,10 @@ impl Evaluator<'_> {
                 .par_iter()
                 .enumerate()
                 .map(|(i, p)| {
-                    let o = self.observer(p, EyePosition::default())?;
-                    Ok(self
-                        .reference
-                        .score_observer(&format!("person_{}", first + i), &o, self.l))
+                    let label = format!("person_{}", first + i);
+                    self.accommodating(p, EyePosition::default(), &|o| {
+                        self.reference.score_observer(&label, o, self.l)
+                    })
                 })
                 .collect::<Result<Vec<_>, EvaluationError>>()?;
             for (i, (s, pic)) in judged.into_iter().enumerate() {
@@ -431,16 +465,18 @@ impl Evaluator<'_> {
             let mut people_read = 0;
             let mut light = 0.0;
             for (i, p) in people.iter().enumerate() {
-                self.check()?;
-                let o = self.observer(p, eye)?;
-                let view = o.view(self.l);
-                let lum = luminance(&view);
-                light += mean(&lum);
-                let white = luminance_of(o.white);
-                let s = self.score_bystander(&format!("bystander {at} person {i}"), &lum, white, &o.grid(), eye);
+                let label = format!("bystander {at} person {i}");
+                let (s, (person_light, pic)) = self.accommodating(p, eye, &|o| {
+                    let view = o.view(self.l);
+                    let lum = luminance(&view);
+                    let white = luminance_of(o.white);
+                    let s = self.score_bystander(&label, &lum, white, &o.grid(), eye);
+                    (s, (mean(&lum), o.picture(&view)))
+                })?;
+                light += person_light;
                 people_read += u32::from(s.readable);
                 if best_view.as_ref().is_none_or(|(b, _)| s.legibility > *b) {
-                    best_view = Some((s.legibility, o.picture(&view)));
+                    best_view = Some((s.legibility, pic));
                 }
                 if best_person.as_ref().is_none_or(|b| s.legibility > b.legibility) {
                     best_person = Some(s);
@@ -618,6 +654,76 @@ mod tests {
                 assert!(p.relative_light < 0.01, "{p:#?}");
             }
         }
+    }
+
+    #[test]
+    fn an_observer_who_can_refocus_onto_the_text_reads_it_and_the_report_says_at_which_focus() {
+        // A plain PIN slip seen by eyes defocused by spheres of +2 D (far-sighted: accommodating 2 D corrects
+        // it), −1 D (near-sighted: relaxing 1 D corrects it) and +3.5 D (beyond the 2 D the range allows). Held
+        // at their own focus none of them reads; allowed to refocus, the first two do, at the focus that cancels
+        // their sphere, and the third does not.
+        let (display, document, l) = plain_pin();
+        let eye = |sphere_d: f64| VisionProfile {
+            prescription: Some(crate::physics::zernike::Prescription {
+                sphere_d,
+                cylinder_d: 0.0,
+                axis_deg: 0.0,
+            }),
+            ..VisionProfile::perfect()
+        };
+        let observers: Vec<(String, VisionProfile)> = [2.0, -1.0, 3.5]
+            .iter()
+            .map(|d| (format!("sphere {d:+} D"), eye(*d)))
+            .collect();
+        let judged = |accommodation: Accommodation| {
+            let options = EvaluationOptions {
+                population: 0,
+                sub_rays: 4,
+                key_directions: 0,
+                head_offsets_mm: vec![],
+                camera_focus_d: vec![],
+                document_text: Some(DocumentText {
+                    lines: PIN_LINES.iter().map(|s| s.to_string()).collect(),
+                    scale: 4,
+                    alphabet: "0123456789".into(),
+                }),
+                accommodation,
+                ..Default::default()
+            };
+            evaluate(
+                &display,
+                &l,
+                &document,
+                0.8,
+                &VisionProfile::perfect(),
+                &observers,
+                &options,
+                &TransportCache::default(),
+                &|_| {},
+                &AtomicBool::new(false),
+            )
+            .unwrap()
+            .report
+            .observers
+        };
+        let fixed = judged(Accommodation::fixed());
+        assert!(fixed.iter().all(|s| !s.readable && s.focus_d.is_none()), "{fixed:#?}");
+        let refocusing = judged(Accommodation::default());
+        let verdicts: Vec<(bool, Option<f64>)> = refocusing.iter().map(|s| (s.readable, s.focus_d)).collect();
+        // The first focus that reads, met on the way out from the own focus: a residual defocus of 0.5 D
+        // (about 0.9 retinal pixels of blur at 6 mm) still reads, so it lies within 0.5 D short of the sphere.
+        for (k, sphere) in [(0, 2.0f64), (1, -1.0)] {
+            let (reads, focus) = verdicts[k];
+            let focus = focus.unwrap();
+            assert!(reads, "{refocusing:#?}");
+            assert!(
+                focus.signum() == sphere.signum() && (sphere - focus).abs() <= 0.5 + 1e-9,
+                "{refocusing:#?}"
+            );
+        }
+        // Out of reach: not read, and the view reported is its most legible, at the range's nearer end.
+        assert!(!verdicts[2].0, "{refocusing:#?}");
+        assert_eq!(verdicts[2].1, Some(2.0), "{refocusing:#?}");
     }
 
     #[test]

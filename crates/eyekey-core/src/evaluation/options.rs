@@ -1,6 +1,7 @@
 //! What an evaluation looks at, and how hard.
 
 use crate::evaluation::DEFAULT_THRESHOLD;
+use crate::physics::accommodation::Accommodation;
 use crate::physics::observer::Optics;
 use serde::{Deserialize, Serialize};
 
@@ -37,6 +38,9 @@ pub struct EvaluationOptions {
     /// Where the text is known, the known-font margin the target must read its view with to be called read
     /// (the job's `target_margin`).
     pub target_margin: f64,
+    /// The focus range every sampled person, bystander and named observer is judged over: each reads when any
+    /// focus in it reads ([`Accommodation::fixed`] holds everyone at their profile's focus).
+    pub accommodation: Accommodation,
 }
 
 impl EvaluationOptions {
@@ -75,6 +79,7 @@ impl Default for EvaluationOptions {
             document_text: None,
             bystanders: None,
             target_margin: 0.0,
+            accommodation: Accommodation::default(),
         }
     }
 }

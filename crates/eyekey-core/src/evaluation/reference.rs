@@ -71,6 +71,7 @@ impl Reference {
             legibility: leg,
             ncc: ncc(view_luminance, &self.document),
             psnr_db: psnr(&norm, &objective, self.level),
+            focus_d: None,
             ssim: ssim(&norm, &objective, self.width, self.height, self.level),
             // Where the text is known the matched filter is the judge (docs/design.md §4); elsewhere the
             // calibrated threshold.
@@ -138,6 +139,7 @@ mod tests {
             legibility,
             ncc: 0.0,
             psnr_db: 0.0,
+            focus_d: None,
             ssim: 0.0,
             readable: known_font
                 .as_ref()

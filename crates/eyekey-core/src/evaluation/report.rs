@@ -21,6 +21,11 @@ pub struct ViewScore {
     /// What the known-font attacker read, when the document's text is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font: Option<crate::evaluation::KnownFontRead>,
+    /// For a viewer who may refocus: the accommodation this view was seen at, dioptres of power added to the
+    /// profile's eye (+ nearer, 0 its own focus; `EvaluationOptions::accommodation`): the first focus that reads,
+    /// else the most legible.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_d: Option<f64>,
     /// The known-font attacker read every secret character (when the document's text is known); otherwise
     /// legibility ≥ threshold: somebody *might* read it. For the report's target, whether the target *reads* it,
     /// by the target's stricter bar ([`Report::target_reading`]).
@@ -99,6 +104,9 @@ pub struct PopulationSummary {
     pub count: u32,
     /// How many could read.
     pub readable_count: u32,
+    /// How many of them read at their own focus (without refocusing).
+    #[serde(default)]
+    pub readable_at_own_focus: u32,
     /// readable_count / count.
     pub readable_fraction: f64,
     /// 95 % confidence interval of the fraction who read (Wilson score interval).
@@ -129,6 +137,10 @@ impl PopulationSummary {
         let mut legs: Vec<f64> = scores.iter().map(|s| s.legibility).collect();
         legs.sort_by(|a, b| a.total_cmp(b));
         let readable = scores.iter().filter(|s| s.readable).count() as u32;
+        let readable_at_own_focus = scores
+            .iter()
+            .filter(|s| s.readable && s.focus_d.unwrap_or(0.0) == 0.0)
+            .count() as u32;
         let fraction = |t: f64| legs.iter().filter(|v| **v >= t).count() as f64 / legs.len().max(1) as f64;
         let known_font_readers = scores.iter().any(|s| s.known_font.is_some()).then(|| {
             scores
@@ -149,6 +161,7 @@ impl PopulationSummary {
         Self {
             count: scores.len() as u32,
             readable_count: readable,
+            readable_at_own_focus,
             known_font_all_but_one,
             readable_fraction: readable as f64 / scores.len().max(1) as f64,
             readable_ci95: wilson_interval(readable as u64, scores.len() as u64, 1.959_964),
@@ -319,6 +332,7 @@ mod tests {
             ncc: 0.0,
             psnr_db: 0.0,
             ssim: 0.0,
+            focus_d: None,
             known_font: Some(crate::evaluation::KnownFontRead {
                 text: String::new(),
                 correct: right == 4,
@@ -339,5 +353,27 @@ mod tests {
         plain.known_font = None;
         let p = PopulationSummary::from_scores(vec![plain]);
         assert_eq!((p.known_font_readers, p.known_font_all_but_one), (None, None));
+    }
+
+    #[test]
+    fn people_who_read_only_after_refocusing_count_as_readers_but_not_at_their_own_focus() {
+        let person = |readable: bool, focus_d: Option<f64>| ViewScore {
+            label: String::new(),
+            legibility: 0.5,
+            ncc: 0.0,
+            psnr_db: 0.0,
+            ssim: 0.0,
+            focus_d,
+            known_font: None,
+            readable,
+        };
+        let p = PopulationSummary::from_scores(vec![
+            person(true, Some(0.0)),
+            person(true, Some(0.75)),
+            person(true, None),
+            person(false, Some(-1.0)),
+            person(false, Some(0.0)),
+        ]);
+        assert_eq!((p.readable_count, p.readable_at_own_focus), (3, 2));
     }
 }

@@ -1,5 +1,6 @@
 //! The physical model: the viewer's eye, the display and the light transport between them (docs/design.md §2).
 
+pub mod accommodation;
 pub mod chromatic;
 pub mod diffraction;
 pub mod display;

@@ -145,6 +145,7 @@ fn person<R: Rng + ?Sized>(
         prescription: None,
         spectral,
         reference_wavelength_nm: None,
+        age_years: None,
     }
 }
 

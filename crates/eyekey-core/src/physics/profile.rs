@@ -58,6 +58,12 @@ pub struct VisionProfile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[cfg_attr(feature = "openapi", schema(minimum = 400.0, maximum = 1000.0))]
     pub reference_wavelength_nm: Option<f64>,
+    /// Age in years (0–120), when known: it narrows how far the eye can accommodate
+    /// ([`Accommodation`](crate::physics::accommodation::Accommodation)), so the evaluation judges an older
+    /// viewer over fewer focus states. Unknown: the young eye's full range.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[cfg_attr(feature = "openapi", schema(minimum = 0.0, maximum = 120.0))]
+    pub age_years: Option<f64>,
 }
 
 /// One Zernike coefficient, µm (the schema of an item of `zernike_um`).
@@ -92,6 +98,7 @@ impl VisionProfile {
             prescription: None,
             spectral: SpectralSensitivity::default(),
             reference_wavelength_nm: None,
+            age_years: None,
         }
     }
 
@@ -120,6 +127,11 @@ impl VisionProfile {
                     "reference_wavelength_nm",
                     format!("must be within 400..=1000 nm, got {w}"),
                 ));
+            }
+        }
+        if let Some(a) = self.age_years {
+            if !(a.is_finite() && (0.0..=120.0).contains(&a)) {
+                return Err(bad("age_years", format!("must be within 0..=120 years, got {a}")));
             }
         }
         if let Some(z) = self.zernike_pupil_diameter_mm {
