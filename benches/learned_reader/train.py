@@ -103,12 +103,45 @@ def pct(v):
     return f"{100 * v:.1f} %"
 
 
+def export(args, manifest, crops, enc, cond, truth):
+    """The shipped linear reader: per cell, softmax(W·x + b) over the ten digits, x the cell's crop normalised to
+    zero mean and unit variance, fitted on every encoding's seat views."""
+    rows = np.isin(cond, ["seat", "seat_refocused"])
+    models = []
+    for k in range(len(manifest["cells"])):
+        fit = logistic(crops[k][rows], truth[rows, k], args.seed)
+        weights = np.zeros((10, crops[k].shape[1]))
+        bias = np.full(10, -1e3)
+        weights[fit.classes_.astype(int)] = fit.coef_
+        bias[fit.classes_.astype(int)] = fit.intercept_
+        models.append({"c": fit.C, "weights": weights.round(6).tolist(), "bias": bias.round(6).tolist()})
+    out = {
+        "preset": manifest["preset"],
+        "grid": manifest["grid"],
+        "cells": manifest["cells"],
+        "made": (
+            f"benches/learned_reader/train.py --export on `eyekey experiment reader-views` output: "
+            f"{len(np.unique(enc[rows]))} encodings ({manifest['options']}), {int(rows.sum())} views of fresh "
+            f"people at the seat, at their own focus and refocused to the target's spherical equivalent"
+        ),
+        "models": models,
+    }
+    args.export.write_text(json.dumps(out) + "\n")
+    print(f"wrote {args.export}: {out['made']}\n", file=sys.stderr)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("views", type=Path, nargs="+", help="directories written by `eyekey experiment reader-views`")
     ap.add_argument("--test", type=int, default=40, help="test encodings (the last ones)")
     ap.add_argument("--curve", type=int, nargs="*", default=[30, 60], help="smaller training sets for the curve")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--export",
+        type=Path,
+        help="also fit the linear reader on every encoding's seat views (own focus and refocused) and write its "
+        "weights here as JSON, for the evaluation (data/readers/)",
+    )
     args = ap.parse_args()
 
     manifests, xs = zip(*(load(v) for v in args.views))
@@ -159,6 +192,9 @@ def main():
             f"{pct(mf[te].mean())} ({pct(mf_lo)}–{pct(mf_hi)}) |"
         )
         sys.stdout.flush()
+
+    if args.export:
+        export(args, manifest, crops, enc, cond, truth)
 
     n = len(train_all)
     cameras = sorted({c for c in cond if c.startswith("camera")})

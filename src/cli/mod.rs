@@ -213,9 +213,9 @@ pub enum ExperimentCommand {
         /// The decoys look through the target's pupil (`decoys_at_target_pupil`).
         #[arg(long)]
         decoys_at_target_pupil: bool,
-        /// The decoys refocus to the target's spherical equivalent (`decoys_at_target_focus`).
-        #[arg(long)]
-        decoys_at_target_focus: bool,
+        /// At which focus the sampled decoys look (`decoy_focus`).
+        #[arg(long, value_enum, default_value = "own")]
+        decoy_focus: eyekey_core::encoding::pipeline::DecoyFocus,
         /// Encode each slip as an uploaded image, without its text hint (the evaluation still reads it with the
         /// known-font attacker).
         #[arg(long)]
@@ -296,9 +296,9 @@ pub enum ExperimentCommand {
         /// How hard to hide (`security`).
         #[arg(long, value_enum, default_value = "standard")]
         security: eyekey_core::encoding::pipeline::Security,
-        /// The decoys refocus to the target's spherical equivalent (`decoys_at_target_focus`).
-        #[arg(long)]
-        decoys_at_target_focus: bool,
+        /// At which focus the sampled decoys look (`decoy_focus`).
+        #[arg(long, value_enum, default_value = "own")]
+        decoy_focus: eyekey_core::encoding::pipeline::DecoyFocus,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.
     Secure {
@@ -803,7 +803,7 @@ pub fn run(cli: Cli) -> Result<()> {
             target_looks,
             preset,
             decoys_at_target_pupil,
-            decoys_at_target_focus,
+            decoy_focus,
             no_hint,
             security,
             target_focus,
@@ -824,7 +824,7 @@ pub fn run(cli: Cli) -> Result<()> {
             let d = eyekey_core::encoding::pipeline::EncodeOptions::default();
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
                 decoys_at_target_pupil,
-                decoys_at_target_focus,
+                decoy_focus,
                 population_decoys: decoys.unwrap_or(d.population_decoys),
                 decoy_weight: decoy_weight.or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),
@@ -861,7 +861,7 @@ pub fn run(cli: Cli) -> Result<()> {
             first,
             people,
             security,
-            decoys_at_target_focus,
+            decoy_focus,
         }) => {
             let setup = crate::research::reader::Setup {
                 preset,
@@ -871,7 +871,7 @@ pub fn run(cli: Cli) -> Result<()> {
             };
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
                 security,
-                decoys_at_target_focus,
+                decoy_focus,
                 ..Default::default()
             };
             println!("{}", crate::research::reader::run(&out, &setup, options)?);
@@ -1153,13 +1153,12 @@ fn evaluate(a: &EvaluateArgs) -> Result<()> {
         println!(
             "population: {}/{} can read, {} of them at their own focus (median legibility {:.2}, 95th percentile \
              {:.2}, max {:.2})",
-            p.readable_count,
-            p.count,
-            p.readable_at_own_focus,
-            p.median_legibility,
-            p.p95_legibility,
-            p.max_legibility
+            p.readable_count, p.count, p.readable_at_own_focus, p.median_legibility, p.p95_legibility, p.max_legibility
         );
+    }
+    match &r.learned_reader {
+        Some(made) => println!("learned reader applied ({made})"),
+        None => println!("no learned reader was trained on this document's layout; none was applied"),
     }
     if let Some(c) = &r.camera {
         println!(

@@ -114,7 +114,7 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
     let cache = TransportCache::default();
     let topts = TransportOptions {
         sub_rays: options.sub_rays,
-        seed: 0x5EE_D0F_EA5E,
+        seed: 0x005E_ED0F_EA5E,
         ..Default::default()
     };
     let started = Instant::now();
@@ -138,8 +138,8 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
         cells: Vec::new(),
         features: 0,
         options: format!(
-            "security {:?}, decoys at the target's focus {}",
-            options.security, options.decoys_at_target_focus
+            "security {:?}, decoys' focus {:?}",
+            options.security, options.decoy_focus
         ),
         records: Vec::new(),
         encodings_refused: 0,
@@ -149,7 +149,7 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
     for i in setup.first..setup.first + setup.encodings {
         // Each encoding's own stream: its target, PIN, encoder seed and people, apart from every other's and from
         // the evaluation's and the experiments' seeds.
-        let stream = 0x1EA_4ED_0000_u64 + u64::from(i) * 7_919;
+        let stream = 0x001E_A4ED_0000_u64 + u64::from(i) * 7_919;
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(stream);
         let target = sample_population(1, stream ^ 0x7A5, Default::default()).remove(0);
         let pin: String = (0..4).map(|_| char::from(b'0' + rng.gen_range(0..10u8))).collect();
@@ -213,11 +213,24 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
             dz_mm: 0.0,
         };
         for person in &people {
-            let (lum, white) = seen(&Observer::new(&display, person, EyePosition::default(), &topts, options.optics, &cache)?);
+            let (lum, white) = seen(&Observer::new(
+                &display,
+                person,
+                EyePosition::default(),
+                &topts,
+                options.optics,
+                &cache,
+            )?);
             write("seat", &lum, white)?;
             let (refocused, _) = range.matching(person, &target)?;
-            let (lum, white) =
-                seen(&Observer::new(&display, &refocused, EyePosition::default(), &topts, options.optics, &cache)?);
+            let (lum, white) = seen(&Observer::new(
+                &display,
+                &refocused,
+                EyePosition::default(),
+                &topts,
+                options.optics,
+                &cache,
+            )?);
             write("seat_refocused", &lum, white)?;
             let o = Observer::new(&display, person, beside, &topts, options.optics, &cache)?;
             let (lum, white) = seen(&o);
@@ -227,7 +240,14 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
             let lum: Vec<f32> = cam.view(l).chunks_exact(3).map(|p| p[0]).collect();
             write(&format!("camera_band_{b}"), &lum, cam.white[0])?;
         }
-        let (lum, white) = seen(&Observer::new(&display, &target, EyePosition::default(), &topts, options.optics, &cache)?);
+        let (lum, white) = seen(&Observer::new(
+            &display,
+            &target,
+            EyePosition::default(),
+            &topts,
+            options.optics,
+            &cache,
+        )?);
         write("target", &lum, white)?;
         eprintln!(
             "encoding {i}: PIN {pin}, {} records, {:.0} s",

@@ -617,7 +617,11 @@ async fn the_console_takes_an_operator_from_sign_in_to_a_finished_jobs_side_by_s
     let verdict_table = text_of(&c, "#verdicts").await;
     assert!(verdict_table.contains("Bystander Bob"));
     // Bob may refocus: his row says at which focus he was judged (his own, or so many dioptres nearer or farther).
-    let bob = verdict_table.lines().find(|l| l.contains("Bystander Bob")).unwrap().to_string();
+    let bob = verdict_table
+        .lines()
+        .find(|l| l.contains("Bystander Bob"))
+        .unwrap()
+        .to_string();
     assert!(
         bob.contains("own focus") || bob.contains(" D (nearer)") || bob.contains(" D (farther)"),
         "{bob}"

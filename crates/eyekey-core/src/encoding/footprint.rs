@@ -94,9 +94,15 @@ pub fn encoder_observers(display: &DisplayGeometry, options: &EncodeOptions, ext
     let adaptive = u64::from(options.adaptive_rounds) * u64::from(options.adaptive_per_round)
         + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_MAX_ADDED)
         + u64::from(options.bystander_rounds) * u64::from(options.bystander_decoys_per_round);
+    // Decoys looking at their own focus and again at the target's are two terms each.
+    let focus_copies = if options.decoy_focus == super::options::DecoyFocus::Both {
+        2
+    } else {
+        1
+    };
     target
-        + u64::from(options.population_decoys)
-        + u64::from(options.near_pupil_decoys) * if options.near_pupil_ring_mm > 0.0 { 2 } else { 1 }
+        + u64::from(options.population_decoys) * focus_copies
+        + u64::from(options.near_pupil_decoys) * focus_copies * if options.near_pupil_ring_mm > 0.0 { 2 } else { 1 }
         + cameras
         + adaptive
         + extra_observers as u64

@@ -98,11 +98,8 @@ pub struct EncodeOptions {
     /// target's is given the target's (their wavefront rescaled to it, ANSI Z80.28 Annex B), so the decoys
     /// compete for exactly the views the target sees.
     pub decoys_at_target_pupil: bool,
-    /// Population and near-pupil decoys, and the adaptive rounds' candidates, accommodate to the focus that
-    /// brings their spherical equivalent nearest the target's, within the range the evaluation lets people
-    /// refocus over (−1 to +2 D, [`Accommodation`](crate::physics::accommodation::Accommodation::matching)): the
-    /// decoys are then the people who refocus to read, not people holding their own focus.
-    pub decoys_at_target_focus: bool,
+    /// At which focus the population and near-pupil decoys (and the adaptive rounds' candidates) look.
+    pub decoy_focus: DecoyFocus,
     /// Further decoys whose pupils bracket the target's, evenly from 0.3 mm narrower to 0.7 mm wider (sampled
     /// people of at least that pupil, their wavefronts rescaled to it, ANSI Z80.28 Annex B). The people who read
     /// a small-pupil target's frames are those whose pupils are near its own: with 6 of them beside the 6
@@ -282,6 +279,24 @@ pub struct EncodeOptions {
     pub document_text: Option<crate::evaluation::DocumentText>,
 }
 
+/// At which focus the sampled decoys look ([`EncodeOptions::decoy_focus`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "snake_case")]
+pub enum DecoyFocus {
+    /// Their profiles' own focus.
+    #[default]
+    Own,
+    /// Each accommodated to the focus that brings their spherical equivalent nearest the target's, within the
+    /// range the evaluation lets people refocus over (−1 to +2 D,
+    /// [`Accommodation::matching`](crate::physics::accommodation::Accommodation::matching)): the people who refocus
+    /// to read rather than people holding their own focus.
+    Target,
+    /// Both: every sampled decoy at its own focus and again at the target's (twice the decoy terms).
+    Both,
+}
+
 impl Default for EncodeOptions {
     fn default() -> Self {
         Self {
@@ -291,7 +306,7 @@ impl Default for EncodeOptions {
             ablation: None,
             population_decoys: 6,
             decoys_at_target_pupil: false,
-            decoys_at_target_focus: false,
+            decoy_focus: DecoyFocus::Own,
             near_pupil_decoys: 6,
             near_pupil_ring_mm: 0.0,
             decoy: DecoyKind::Noise,

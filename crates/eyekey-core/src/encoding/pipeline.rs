@@ -14,9 +14,9 @@ use super::objectives::{noise_decoy, DiffMaxObjective, MultiplexObjective, Term,
 use super::solver::{minimise_judged, Checkpoint, Objective, Progress, SolveResult, SolverOptions, Termination};
 use crate::evaluation::attackers::{camera_channels, camera_lens, camera_rgb, head_ring, one_band_observers, ring};
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
+use crate::physics::accommodation::Accommodation;
 use crate::physics::display::DisplayGeometry;
 use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
-use crate::physics::accommodation::Accommodation;
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
@@ -1253,14 +1253,15 @@ fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>,
     at_target_focus(spec, candidates)
 }
 
-/// With `decoys_at_target_focus`, each of `people` accommodated to the focus nearest the target's
-/// ([`Accommodation::matching`]); otherwise `people` as they are.
+/// `people` at the focus `decoy_focus` asks: as they are, each accommodated to the focus nearest the target's
+/// ([`Accommodation::matching`]), or both (each person, then the same people refocused).
 fn at_target_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<VisionProfile>, PipelineError> {
-    if !spec.options.decoys_at_target_focus {
+    let focus = spec.options.decoy_focus;
+    if focus == DecoyFocus::Own {
         return Ok(people);
     }
     let range = Accommodation::default();
-    people
+    let refocused = people
         .iter()
         .enumerate()
         .map(|(k, p)| {
@@ -1269,7 +1270,11 @@ fn at_target_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<Vis
                 .map(|(eye, _)| eye)
                 .map_err(|e| PipelineError::invalid(format!("decoys[{k}]"), e.to_string()))
         })
-        .collect()
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(match focus {
+        DecoyFocus::Both => people.into_iter().chain(refocused).collect(),
+        _ => refocused,
+    })
 }
 
 /// The decoys a job samples from the population (`population_decoys` of them, from the job's seed; at the target's
@@ -1800,6 +1805,46 @@ mod tests {
         }
         // Another round draws other people.
         assert_ne!(adaptive_candidates(&spec, 2).unwrap()[5..], mixed[5..]);
+    }
+
+    #[test]
+    fn decoys_at_the_target_focus_are_the_same_people_refocused_to_its_spherical_equivalent_within_reach() {
+        use crate::physics::accommodation::spherical_equivalent_d;
+        let mut spec = pin_job(pin_hint());
+        spec.options.population_decoys = 12;
+        spec.options.adaptive_candidates = 12;
+        let own = population_decoys(&spec).unwrap();
+        let own_candidates = adaptive_candidates(&spec, 1).unwrap();
+        spec.options.decoy_focus = DecoyFocus::Target;
+        let matched = population_decoys(&spec).unwrap();
+        let target = spherical_equivalent_d(&spec.target).unwrap();
+        let (mut met, mut out_of_reach) = (0, 0);
+        for (p, q) in own.iter().zip(&matched) {
+            // The same eye (wavefront, pupil, cones); only the sphere moves, by −1 to +2 D of accommodation.
+            assert_eq!(
+                (&p.zernike_um, p.pupil_diameter_mm, &p.spectral),
+                (&q.zernike_um, q.pupil_diameter_mm, &q.spectral)
+            );
+            let (before, after) = (spherical_equivalent_d(p).unwrap(), spherical_equivalent_d(q).unwrap());
+            let a = before - after;
+            assert!((-1.0 - 1e-9..=2.0 + 1e-9).contains(&a), "accommodated {a} D");
+            if (after - target).abs() < 1e-9 {
+                met += 1;
+            } else {
+                // Short of the target only at an end of the range.
+                assert!((a + 1.0).abs() < 1e-9 || (a - 2.0).abs() < 1e-9, "{a}");
+                out_of_reach += 1;
+            }
+        }
+        assert!(met >= 6, "{met} met, {out_of_reach} out of reach");
+        // The adaptive rounds' candidates refocus too.
+        let candidates = adaptive_candidates(&spec, 1).unwrap();
+        assert_eq!(candidates.len(), own_candidates.len());
+        assert!(candidates.iter().zip(&own_candidates).any(|(a, b)| a != b));
+        // Both: the people as they were, then refocused.
+        spec.options.decoy_focus = DecoyFocus::Both;
+        let both = population_decoys(&spec).unwrap();
+        assert_eq!((&both[..12], &both[12..]), (&own[..], &matched[..]));
     }
 
     #[test]

@@ -87,6 +87,7 @@ mod tests {
             ncc: 0.0,
             psnr_db: 0.0,
             focus_d: None,
+            learned: None,
             ssim: 0.0,
             known_font: None,
             readable: legibility >= 0.5,
@@ -113,6 +114,7 @@ mod tests {
             key_sensitivity: None,
             head_movement: None,
             bystanders: None,
+            learned_reader: None,
         };
         let pictures = vec![("target.png".to_string(), RgbImage::from_pixel(8, 8, Rgb([0, 0, 0])))];
         let without = contact_sheet(&report, &pictures);

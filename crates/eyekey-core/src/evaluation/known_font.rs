@@ -362,6 +362,16 @@ impl KnownFontAttacker {
         self.cells.len()
     }
 
+    /// The secret characters in text order, each with its cell's box on the grid.
+    pub fn secret(&self) -> Vec<(char, CellBox)> {
+        self.cells.iter().map(|c| (c.truth, (c.x0, c.y0, c.w, c.h))).collect()
+    }
+
+    /// The candidates for each secret character, sorted.
+    pub fn alphabet(&self) -> &[char] {
+        &self.alphabet
+    }
+
     /// What tells each secret cell's true glyph from the others: per cell, its box on the grid (x0, y0, width,
     /// height) and the true glyph's template minus the mean of the other candidates' (row-major in the box). A
     /// view whose cells are orthogonal to these, after the attacker's mean removal, gives the true glyph no edge.

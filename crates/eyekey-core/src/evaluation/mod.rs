@@ -19,6 +19,7 @@ mod bystanders;
 mod contact_sheet;
 mod key_sensitivity;
 mod known_font;
+mod learned;
 mod metrics;
 mod options;
 mod reference;
@@ -30,6 +31,7 @@ pub use bystanders::{guesses_to_read, unwarp, BystanderOptions, BystanderPositio
 pub use contact_sheet::contact_sheet;
 use key_sensitivity::*;
 pub use known_font::{DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
+pub use learned::{BoundReader, LearnedRead, LearnedReader};
 pub use metrics::*;
 pub use options::EvaluationOptions;
 pub use reference::Reference;
@@ -129,6 +131,7 @@ pub fn evaluate(
         key_sensitivity,
         head_movement,
         bystanders,
+        learned_reader: ev.reference.learned.as_ref().map(|r| r.made().to_string()),
     };
     if let (Some(k), Some(p)) = (report.key_sensitivity.as_mut(), report.population.as_ref()) {
         k.empirical_bits = -(((p.readable_count + 1) as f64) / ((p.count + 1) as f64)).log2();

@@ -22,6 +22,8 @@ pub struct Reference {
     pub threshold: f64,
     /// The known-font attacker, when the document's text is known.
     pub known_font: Option<crate::evaluation::KnownFontAttacker>,
+    /// The learned reader, when one was trained on the document's layout.
+    pub learned: Option<crate::evaluation::BoundReader>,
     /// The box around the document's ink where legibility is measured (x0, y0, x1, y1).
     pub ink_box: (usize, usize, usize, usize),
     /// How tall the document's characters are on the grid ([`text_height_on_grid`](crate::evaluation::text_height_on_grid)):
@@ -43,13 +45,17 @@ impl Reference {
             level,
             threshold,
             known_font: None,
+            learned: None,
             ink_box,
             text_height,
         }
     }
 
-    /// The same reference with the known-font attacker reading every view too.
+    /// The same reference with the known-font attacker reading every view too, and the learned reader where one
+    /// was trained on the document's layout ([`LearnedReader::for_document`](crate::evaluation::LearnedReader)).
     pub fn with_known_font(mut self, attacker: crate::evaluation::KnownFontAttacker) -> Self {
+        self.learned =
+            crate::evaluation::LearnedReader::for_document(&attacker, (self.width as u32, self.height as u32));
         self.known_font = Some(attacker);
         self
     }
@@ -65,7 +71,9 @@ impl Reference {
             .collect();
         let objective: Vec<f32> = self.document.iter().map(|v| (*v as f64 * self.level) as f32).collect();
         let known_font = self.known_font.as_ref().map(|a| a.read_denoised(&denoised));
-        let read = known_font.as_ref().is_some_and(|k| k.correct);
+        let learned = self.learned.as_ref().map(|r| r.read(view_luminance));
+        // Either reader reading every secret character reads the view.
+        let read = known_font.as_ref().is_some_and(|k| k.correct) || learned.as_ref().is_some_and(|r| r.correct);
         ViewScore {
             label: label.to_string(),
             legibility: leg,
@@ -73,14 +81,15 @@ impl Reference {
             psnr_db: psnr(&norm, &objective, self.level),
             focus_d: None,
             ssim: ssim(&norm, &objective, self.width, self.height, self.level),
-            // Where the text is known the matched filter is the judge (docs/design.md §4); elsewhere the
-            // calibrated threshold.
+            // Where the text is known the matched filter and, for a layout one was trained on, the learned reader
+            // are the judges (docs/design.md §4); elsewhere the calibrated threshold.
             readable: if known_font.is_some() {
                 read
             } else {
                 leg >= self.threshold
             },
             known_font,
+            learned,
         }
     }
 
@@ -140,6 +149,7 @@ mod tests {
             ncc: 0.0,
             psnr_db: 0.0,
             focus_d: None,
+            learned: None,
             ssim: 0.0,
             readable: known_font
                 .as_ref()

@@ -21,13 +21,17 @@ pub struct ViewScore {
     /// What the known-font attacker read, when the document's text is known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font: Option<crate::evaluation::KnownFontRead>,
+    /// What the learned reader read, when one was trained on the document's layout
+    /// ([`LearnedReader`](crate::evaluation::LearnedReader)).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned: Option<crate::evaluation::LearnedRead>,
     /// For a viewer who may refocus: the accommodation this view was seen at, dioptres of power added to the
     /// profile's eye (+ nearer, 0 its own focus; `EvaluationOptions::accommodation`): the first focus that reads,
     /// else the most legible.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focus_d: Option<f64>,
-    /// The known-font attacker read every secret character (when the document's text is known); otherwise
-    /// legibility ≥ threshold: somebody *might* read it. For the report's target, whether the target *reads* it,
+    /// The known-font attacker (or the learned reader) read every secret character (when the document's text is
+    /// known); otherwise legibility ≥ threshold: somebody *might* read it. For the report's target, whether the target *reads* it,
     /// by the target's stricter bar ([`Report::target_reading`]).
     pub readable: bool,
 }
@@ -114,6 +118,9 @@ pub struct PopulationSummary {
     /// How many the known-font attacker read (when the document's text is known).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub known_font_readers: Option<u32>,
+    /// How many the learned reader read (when one was trained on the document's layout).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned_readers: Option<u32>,
     /// How many the known-font attacker read with at most one secret character wrong: the readers of an
     /// attacker allowed one guess per candidate of the character it is least sure of (10 guesses for a PIN).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -148,6 +155,12 @@ impl PopulationSummary {
                 .filter(|s| s.known_font.as_ref().is_some_and(|k| k.correct))
                 .count() as u32
         });
+        let learned_readers = scores.iter().any(|s| s.learned.is_some()).then(|| {
+            scores
+                .iter()
+                .filter(|s| s.learned.as_ref().is_some_and(|k| k.correct))
+                .count() as u32
+        });
         let known_font_all_but_one = known_font_readers.map(|_| {
             scores
                 .iter()
@@ -166,6 +179,7 @@ impl PopulationSummary {
             readable_fraction: readable as f64 / scores.len().max(1) as f64,
             readable_ci95: wilson_interval(readable as u64, scores.len() as u64, 1.959_964),
             known_font_readers,
+            learned_readers,
             median_legibility: percentile(&legs, 0.5),
             p95_legibility: percentile(&legs, 0.95),
             max_legibility: legs.last().copied().unwrap_or(0.0),
@@ -268,6 +282,10 @@ pub struct Report {
     /// Bystanders beside, above, nearer and farther, people and cameras.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bystanders: Option<crate::evaluation::BystanderSummary>,
+    /// How the learned reader that judged every view was made, when one was trained on the document's layout;
+    /// absent, no learned reader was applied and only the known-font attacker (or legibility) judged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned_reader: Option<String>,
 }
 
 /// A finished evaluation: the report and pictures (file name, image).
@@ -333,6 +351,7 @@ mod tests {
             psnr_db: 0.0,
             ssim: 0.0,
             focus_d: None,
+            learned: None,
             known_font: Some(crate::evaluation::KnownFontRead {
                 text: String::new(),
                 correct: right == 4,
@@ -364,6 +383,7 @@ mod tests {
             psnr_db: 0.0,
             ssim: 0.0,
             focus_d,
+            learned: None,
             known_font: None,
             readable,
         };

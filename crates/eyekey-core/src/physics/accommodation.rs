@@ -63,7 +63,10 @@ impl Accommodation {
             return Err(format!("relax_d must be within 0..=3 D, got {}", self.relax_d));
         }
         if !within(self.accommodate_d, 0.0, 10.0) {
-            return Err(format!("accommodate_d must be within 0..=10 D, got {}", self.accommodate_d));
+            return Err(format!(
+                "accommodate_d must be within 0..=10 D, got {}",
+                self.accommodate_d
+            ));
         }
         if !within(self.step_d, 0.05, 1.0) {
             return Err(format!("step_d must be within 0.05..=1 D, got {}", self.step_d));
@@ -108,11 +111,13 @@ impl Accommodation {
     /// `target`'s ([`spherical_equivalent_d`]): the focus a person who wants to read the target's frames would
     /// look for first, since defocus is most of what tells two people's eyes apart. Returns the eye and the
     /// accommodation, dioptres.
-    pub fn matching(&self, person: &VisionProfile, target: &VisionProfile) -> Result<(VisionProfile, f64), ProfileError> {
+    pub fn matching(
+        &self,
+        person: &VisionProfile,
+        target: &VisionProfile,
+    ) -> Result<(VisionProfile, f64), ProfileError> {
         let states = self.states(person);
-        let (lo, hi) = states
-            .iter()
-            .fold((0f64, 0f64), |(l, h), s| (l.min(*s), h.max(*s)));
+        let (lo, hi) = states.iter().fold((0f64, 0f64), |(l, h), s| (l.min(*s), h.max(*s)));
         // Accommodating by a makes the eye's spherical equivalent a dioptres more negative.
         let a = (spherical_equivalent_d(person)? - spherical_equivalent_d(target)?).clamp(lo, hi);
         Ok((Self::accommodated(person, a), a))

@@ -1,0 +1,226 @@
+//! The learned reader: a judge trained on other jobs' frames (docs/design.md §4, docs/experiments.md §0b).
+//!
+//! An attacker who knows eyekey can encode PIN slips for sampled targets, simulate what people see of them, and
+//! train a reader on the character cells; measured on fresh encodings, such a reader reads PINs the matched filter
+//! misses. eyekey ships the linear one for the layouts it was trained on (`data/readers/`, made by
+//! `benches/learned_reader/train.py --export` on `eyekey experiment reader-views` output) and the evaluation counts
+//! it: per secret cell, the digit of highest softmax(W·x + b), x the cell's luminance normalised to zero mean and
+//! unit variance (so the view's contrast and the viewer's white do not matter). It applies only to a document
+//! whose four secret digits land on exactly the cells, and the view on exactly the grid, it was trained on; for
+//! every other document the report says no learned reader was applied.
+
+use serde::{Deserialize, Serialize};
+
+use crate::evaluation::KnownFontAttacker;
+
+/// The readers eyekey ships, as trained (JSON).
+const SHIPPED: &[&str] = &[include_str!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../data/readers/secure-pin-slip.json"
+))];
+
+/// One cell's linear model over the ten digits.
+#[derive(Clone, Debug, Deserialize)]
+struct CellModel {
+    /// W: ten rows of the cell's pixel count.
+    weights: Vec<Vec<f32>>,
+    /// b: ten.
+    bias: Vec<f32>,
+}
+
+/// A linear reader for one layout of four digits on one retinal grid.
+#[derive(Clone, Debug, Deserialize)]
+pub struct LearnedReader {
+    /// The display preset it was trained on.
+    pub preset: String,
+    /// The retinal grid, width × height.
+    grid: [usize; 2],
+    /// Each secret cell's box on the grid: x0, y0, width, height.
+    cells: Vec<[usize; 4]>,
+    /// How it was made.
+    pub made: String,
+    models: Vec<CellModel>,
+}
+
+/// What the learned reader made of one view.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct LearnedRead {
+    /// The digits as read, in text order.
+    pub text: String,
+    /// Every digit right.
+    pub correct: bool,
+    /// How many digits are right.
+    pub characters_right: u32,
+}
+
+/// A learned reader bound to one document: the reader and the digits it must find.
+#[derive(Clone, Debug)]
+pub struct BoundReader {
+    reader: LearnedReader,
+    truth: Vec<u8>,
+}
+
+impl LearnedReader {
+    /// Parses a reader and checks its shapes.
+    pub fn from_json(text: &str) -> Result<Self, String> {
+        let r: Self = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        if r.cells.len() != r.models.len() || r.cells.is_empty() {
+            return Err(format!("{} cells but {} models", r.cells.len(), r.models.len()));
+        }
+        for (c, m) in r.cells.iter().zip(&r.models) {
+            let n = c[2] * c[3];
+            if m.bias.len() != 10 || m.weights.len() != 10 || m.weights.iter().any(|w| w.len() != n) {
+                return Err(format!(
+                    "a cell of {n} pixels needs 10 rows of {n} weights and 10 biases"
+                ));
+            }
+            if c[0] + c[2] > r.grid[0] || c[1] + c[3] > r.grid[1] {
+                return Err(format!("cell {c:?} outside the {:?} grid", r.grid));
+            }
+        }
+        Ok(r)
+    }
+
+    /// The readers eyekey ships.
+    pub fn shipped() -> Vec<Self> {
+        SHIPPED
+            .iter()
+            .map(|t| Self::from_json(t).expect("a shipped reader parses"))
+            .collect()
+    }
+
+    /// The shipped reader for the document the known-font `attacker` reads on a `grid`-sized retina, when one was
+    /// trained on exactly its layout: digits only, the same secret cells on the same grid.
+    pub fn for_document(attacker: &KnownFontAttacker, grid: (u32, u32)) -> Option<BoundReader> {
+        let secret = attacker.secret();
+        let digits_only = attacker.alphabet().iter().collect::<String>() == "0123456789";
+        if !digits_only {
+            return None;
+        }
+        Self::shipped().into_iter().find_map(|reader| {
+            let fits = reader.grid == [grid.0 as usize, grid.1 as usize]
+                && reader.cells.len() == secret.len()
+                && reader
+                    .cells
+                    .iter()
+                    .zip(&secret)
+                    .all(|(c, (_, (x0, y0, w, h)))| *c == [*x0, *y0, *w, *h]);
+            fits.then(|| BoundReader {
+                reader,
+                truth: secret.iter().map(|(ch, _)| *ch as u8 - b'0').collect(),
+            })
+        })
+    }
+
+    /// The digit each cell of the luminance `view` (row-major on the grid) most probably shows.
+    pub fn read_digits(&self, view: &[f32]) -> Vec<u8> {
+        assert_eq!(view.len(), self.grid[0] * self.grid[1], "view size");
+        self.cells
+            .iter()
+            .zip(&self.models)
+            .map(|(&[x0, y0, w, h], m)| {
+                let mut x: Vec<f64> = (y0..y0 + h)
+                    .flat_map(|y| (x0..x0 + w).map(move |xx| (y, xx)))
+                    .map(|(y, xx)| view[y * self.grid[0] + xx] as f64)
+                    .collect();
+                let mean = x.iter().sum::<f64>() / x.len() as f64;
+                let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+                for v in &mut x {
+                    *v = (*v - mean) / sd.max(1e-9);
+                }
+                let logit =
+                    |d: usize| m.bias[d] as f64 + m.weights[d].iter().zip(&x).map(|(w, v)| *w as f64 * v).sum::<f64>();
+                (0..10).max_by(|a, b| logit(*a).total_cmp(&logit(*b))).unwrap_or(0) as u8
+            })
+            .collect()
+    }
+}
+
+impl BoundReader {
+    /// The reader applied to the luminance `view`.
+    pub fn read(&self, view: &[f32]) -> LearnedRead {
+        let digits = self.reader.read_digits(view);
+        let right = digits.iter().zip(&self.truth).filter(|(a, b)| a == b).count() as u32;
+        LearnedRead {
+            text: digits.iter().map(|d| char::from(b'0' + d)).collect(),
+            correct: right as usize == self.truth.len(),
+            characters_right: right,
+        }
+    }
+
+    /// How the reader was made.
+    pub fn made(&self) -> &str {
+        &self.reader.made
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::DocumentText;
+
+    fn secure_slip(pin: &str) -> (image::RgbImage, DocumentText) {
+        let text = DocumentText {
+            lines: vec!["PIN".into(), pin.into()],
+            scale: 128 / 28,
+            alphabet: "0123456789".into(),
+        };
+        let doc = crate::imaging::glyphs::render_text(&["PIN", pin], 128, 128, text.scale);
+        (doc, text)
+    }
+
+    #[test]
+    fn the_shipped_reader_applies_to_the_secure_pin_slip_it_was_trained_on_and_nothing_else() {
+        let shipped = LearnedReader::shipped();
+        assert_eq!(shipped[0].preset, "secure");
+        let [gw, gh] = shipped[0].grid;
+        let (_, text) = secure_slip("4821");
+        let attacker = KnownFontAttacker::new(&text, 128, 128, gw as u32, gh as u32).unwrap();
+        assert!(LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).is_some());
+        // Another grid, or the slip drawn at another scale, is not the layout it learned.
+        assert!(LearnedReader::for_document(&attacker, (gw as u32 + 8, gh as u32)).is_none());
+        let small = DocumentText {
+            scale: 3,
+            ..text.clone()
+        };
+        let other = KnownFontAttacker::new(&small, 128, 128, gw as u32, gh as u32).unwrap();
+        assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
+        // Letters in the alphabet: not the digits it knows.
+        let letters = DocumentText {
+            alphabet: "0123456789AB".into(),
+            ..text
+        };
+        let other = KnownFontAttacker::new(&letters, 128, 128, gw as u32, gh as u32).unwrap();
+        assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
+    }
+
+    #[test]
+    fn the_shipped_reader_reads_the_slip_itself_and_every_pin_is_its_own() {
+        // The plain document on the grid (what a perfect eye on a plain display sees) is read right for PINs it
+        // never saw as a whole, and its reading follows the digits.
+        let reader = &LearnedReader::shipped()[0];
+        let [gw, gh] = reader.grid;
+        for pin in ["4821", "0000", "9517", "3062"] {
+            let (doc, text) = secure_slip(pin);
+            let attacker = KnownFontAttacker::new(&text, 128, 128, gw as u32, gh as u32).unwrap();
+            let bound = LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).unwrap();
+            let view = crate::evaluation::image_luminance(&crate::imaging::resize(&doc, gw as u32, gh as u32));
+            let read = bound.read(&view);
+            assert_eq!((read.text.as_str(), read.correct), (pin, true), "{read:?}");
+        }
+    }
+
+    #[test]
+    fn a_reader_whose_weights_do_not_fit_its_cells_is_refused() {
+        let one = |n: usize| {
+            serde_json::json!({
+                "preset": "x", "grid": [8, 8], "cells": [[0, 0, 2, 2]], "made": "",
+                "models": [{"weights": vec![vec![0.0; n]; 10], "bias": vec![0.0; 10]}]
+            })
+            .to_string()
+        };
+        assert!(LearnedReader::from_json(&one(4)).is_ok());
+        assert!(LearnedReader::from_json(&one(5)).is_err());
+    }
+}
