@@ -906,7 +906,7 @@ impl Cast {
         let o = &spec.options;
         let mut people = spec.observers.clone();
         people.extend(population_decoys(spec)?);
-        let near = at_target_focus(
+        let near = at_decoy_focus(
             spec,
             near_pupil_decoys(
                 spec.target.pupil_diameter_mm,
@@ -1250,12 +1250,12 @@ fn adaptive_candidates(spec: &JobSpec, round: u32) -> Result<Vec<VisionProfile>,
         near,
         seed.wrapping_add(500),
     )?);
-    at_target_focus(spec, candidates)
+    at_decoy_focus(spec, candidates)
 }
 
 /// `people` at the focus `decoy_focus` asks: as they are, each accommodated to the focus nearest the target's
 /// ([`Accommodation::matching`]), or both (each person, then the same people refocused).
-fn at_target_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<VisionProfile>, PipelineError> {
+fn at_decoy_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<VisionProfile>, PipelineError> {
     let focus = spec.options.decoy_focus;
     if focus == DecoyFocus::Own {
         return Ok(people);
@@ -1278,7 +1278,7 @@ fn at_target_focus(spec: &JobSpec, people: Vec<VisionProfile>) -> Result<Vec<Vis
 }
 
 /// The decoys a job samples from the population (`population_decoys` of them, from the job's seed; at the target's
-/// pupil with `decoys_at_target_pupil`, at its focus with `decoys_at_target_focus`).
+/// pupil with `decoys_at_target_pupil`, at the focus `decoy_focus` asks).
 fn population_decoys(spec: &JobSpec) -> Result<Vec<VisionProfile>, PipelineError> {
     let o = &spec.options;
     let mut sampled = sample_population(
@@ -1291,7 +1291,7 @@ fn population_decoys(spec: &JobSpec) -> Result<Vec<VisionProfile>, PipelineError
             *p = at_pupil(p, spec.target.pupil_diameter_mm)?;
         }
     }
-    at_target_focus(spec, sampled)
+    at_decoy_focus(spec, sampled)
 }
 
 /// `n` decoys whose pupils bracket the target's `pupil_mm`, evenly from 0.3 mm narrower to 0.7 mm wider (one:

@@ -221,7 +221,8 @@ impl Evaluator<'_> {
     }
 
     /// People sampled from published statistics, each at the design eye position (the worst case: a
-    /// bystander who takes the target's seat) and over their accommodation range. Keeps the first views asked for and the most legible one.
+    /// bystander who takes the target's seat) and over their accommodation range. Keeps the first views asked
+    /// for and the most legible one.
     fn population(&mut self, progress: &dyn Fn(f64)) -> Result<Option<PopulationSummary>, EvaluationError> {
         let options = self.options;
         if options.population == 0 {
