@@ -216,6 +216,9 @@ pub enum ExperimentCommand {
         /// At which focus the sampled decoys look (`decoy_focus`).
         #[arg(long, value_enum, default_value = "own")]
         decoy_focus: eyekey_core::encoding::pipeline::DecoyFocus,
+        /// The leak penalty also covers the shipped learned reader's directions (`leak_learned_reader`).
+        #[arg(long)]
+        leak_learned_reader: bool,
         /// Encode each slip as an uploaded image, without its text hint (the evaluation still reads it with the
         /// known-font attacker).
         #[arg(long)]
@@ -804,6 +807,7 @@ pub fn run(cli: Cli) -> Result<()> {
             preset,
             decoys_at_target_pupil,
             decoy_focus,
+            leak_learned_reader,
             no_hint,
             security,
             target_focus,
@@ -825,6 +829,7 @@ pub fn run(cli: Cli) -> Result<()> {
             let options = eyekey_core::encoding::pipeline::EncodeOptions {
                 decoys_at_target_pupil,
                 decoy_focus,
+                leak_learned_reader,
                 population_decoys: decoys.unwrap_or(d.population_decoys),
                 decoy_weight: decoy_weight.or(d.decoy_weight),
                 leak_weight: leak_weight.unwrap_or(d.leak_weight),

@@ -206,6 +206,7 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
             Ok(())
         };
         let seen = |o: &Observer| (luminance(&o.view(l)), luminance_of(o.white));
+        let at = |p: &VisionProfile, eye: EyePosition| Observer::new(&display, p, eye, &topts, options.optics, &cache);
         let people = sample_population(setup.people as usize, stream ^ 0xB1D, Default::default());
         let beside = EyePosition {
             x_mm: 10.0,
@@ -213,26 +214,12 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
             dz_mm: 0.0,
         };
         for person in &people {
-            let (lum, white) = seen(&Observer::new(
-                &display,
-                person,
-                EyePosition::default(),
-                &topts,
-                options.optics,
-                &cache,
-            )?);
+            let (lum, white) = seen(&at(person, EyePosition::default())?);
             write("seat", &lum, white)?;
             let (refocused, _) = range.matching(person, &target)?;
-            let (lum, white) = seen(&Observer::new(
-                &display,
-                &refocused,
-                EyePosition::default(),
-                &topts,
-                options.optics,
-                &cache,
-            )?);
+            let (lum, white) = seen(&at(&refocused, EyePosition::default())?);
             write("seat_refocused", &lum, white)?;
-            let o = Observer::new(&display, person, beside, &topts, options.optics, &cache)?;
+            let o = at(person, beside)?;
             let (lum, white) = seen(&o);
             write("beside", &unwarp(&lum, &o.grid(), &display, beside), white)?;
         }
@@ -240,14 +227,7 @@ pub fn run(out: &Path, setup: &Setup, options: EncodeOptions) -> Result<String> 
             let lum: Vec<f32> = cam.view(l).chunks_exact(3).map(|p| p[0]).collect();
             write(&format!("camera_band_{b}"), &lum, cam.white[0])?;
         }
-        let (lum, white) = seen(&Observer::new(
-            &display,
-            &target,
-            EyePosition::default(),
-            &topts,
-            options.optics,
-            &cache,
-        )?);
+        let (lum, white) = seen(&at(&target, EyePosition::default())?);
         write("target", &lum, white)?;
         eprintln!(
             "encoding {i}: PIN {pin}, {} records, {:.0} s",

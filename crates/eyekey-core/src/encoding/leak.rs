@@ -17,12 +17,15 @@
 //!   denoised views both attackers read);
 //! * when the text is known, each secret cell's discriminant (its true glyph's template minus the mean of the
 //!   other candidates', [`KnownFontAttacker::discriminants`]) at every ±1 px shift: what gives the true glyph
-//!   its edge in the attacker's arg-max.
+//!   its edge in the attacker's arg-max;
+//! * when asked (`leak_learned_reader`) and a learned reader was trained on the document's layout
+//!   ([`LearnedReader`]), each secret cell's W_true − W_d for every other digit d: what gives the true digit its
+//!   lead in that reader's arg-max.
 //!
 //! Mean removal makes every direction orthogonal to a flat view, so the penalty never asks a decoy for darkness,
 //! only for the absence of the document's pattern.
 
-use crate::evaluation::{gaussian_blur, image_luminance, ink_box, KnownFontAttacker, INK_MARGIN};
+use crate::evaluation::{gaussian_blur, image_luminance, ink_box, KnownFontAttacker, LearnedReader, INK_MARGIN};
 use crate::imaging;
 
 /// The leak directions of one document on one retinal grid.
@@ -38,8 +41,15 @@ pub const LEAK_BLURS: [f64; 3] = [0.0, 1.0, 2.0];
 
 impl LeakPatterns {
     /// The directions for `document` seen on a `width`×`height` grid, with `attacker`'s cell discriminants when
-    /// the document's text is known.
-    pub fn new(document: &image::RgbImage, width: u32, height: u32, attacker: Option<&KnownFontAttacker>) -> Self {
+    /// the document's text is known, and with `learned` the lead directions of the learned reader trained on its
+    /// layout, where there is one.
+    pub fn new(
+        document: &image::RgbImage,
+        width: u32,
+        height: u32,
+        attacker: Option<&KnownFontAttacker>,
+        learned: bool,
+    ) -> Self {
         let (w, h) = (width as usize, height as usize);
         let lum = image_luminance(&imaging::resize(document, width, height));
         let (x0, y0, x1, y1) = ink_box(&lum, w, h, INK_MARGIN);
@@ -56,24 +66,35 @@ impl LeakPatterns {
                 (x0..x1).contains(&(i % w)) && (y0..y1).contains(&(i / w))
             }));
         }
-        for ((cx, cy, cw, ch), d) in attacker.map(|a| a.discriminants()).unwrap_or_default() {
-            for dy in -1isize..=1 {
-                for dx in -1isize..=1 {
-                    let (sx, sy) = (cx as isize + dx, cy as isize + dy);
-                    if sx < 0 || sy < 0 || sx as usize + cw > w || sy as usize + ch > h {
-                        continue;
-                    }
-                    let (sx, sy) = (sx as usize, sy as usize);
-                    let mut q = vec![0f32; w * h];
-                    for j in 0..ch {
-                        for i in 0..cw {
-                            q[(sy + j) * w + sx + i] = d[j * cw + i];
-                        }
-                    }
-                    let inside = |k: usize| (sx..sx + cw).contains(&(k % w)) && (sy..sy + ch).contains(&(k / w));
-                    directions.extend(unit_zero_mean(q, inside));
+        let glyphs = attacker.map(|a| a.discriminants()).unwrap_or_default();
+        // The learned reader's too, where one was trained on this layout (`evaluation::learned`).
+        let learned = attacker
+            .filter(|_| learned)
+            .and_then(|a| LearnedReader::for_document(a, (width, height)))
+            .map(|r| r.discriminants())
+            .unwrap_or_default();
+        // The known-font attacker reads each glyph at every ±1 px shift; the learned reader at its own cells.
+        let shifts: Vec<(isize, isize)> = (-1isize..=1)
+            .flat_map(|dy| (-1isize..=1).map(move |dx| (dx, dy)))
+            .collect();
+        let placed = glyphs
+            .iter()
+            .flat_map(|g| shifts.iter().map(move |s| (g, *s)))
+            .chain(learned.iter().map(|g| (g, (0, 0))));
+        for (((cx, cy, cw, ch), d), (dx, dy)) in placed {
+            let (sx, sy) = (*cx as isize + dx, *cy as isize + dy);
+            if sx < 0 || sy < 0 || sx as usize + cw > w || sy as usize + ch > h {
+                continue;
+            }
+            let (sx, sy) = (sx as usize, sy as usize);
+            let mut q = vec![0f32; w * h];
+            for j in 0..*ch {
+                for i in 0..*cw {
+                    q[(sy + j) * w + sx + i] = d[j * cw + i];
                 }
             }
+            let inside = |k: usize| (sx..sx + cw).contains(&(k % w)) && (sy..sy + ch).contains(&(k / w));
+            directions.extend(unit_zero_mean(q, inside));
         }
         Self {
             directions,
@@ -170,9 +191,20 @@ mod tests {
     #[test]
     fn directions_are_unit_and_blind_to_flat_views() {
         let (doc, attacker) = pin();
-        let p = LeakPatterns::new(&doc, 32, 32, Some(&attacker));
-        // 3 blurs of the ink box, and 4 cells at 9 shifts each (all inside a 32×32 grid here).
-        assert_eq!(p.len(), 3 + 4 * 9);
+        let p = LeakPatterns::new(&doc, 32, 32, Some(&attacker), true);
+        // 3 blurs of the ink box, 4 cells at 9 shifts each (all inside a 32×32 grid here) and, this being the
+        // `secure` slip the shipped learned reader was trained on, its 9 lead directions per cell when asked.
+        assert_eq!(p.len(), 3 + 4 * 9 + 4 * 9);
+        assert_eq!(LeakPatterns::new(&doc, 32, 32, Some(&attacker), false).len(), 3 + 4 * 9);
+        // Another layout gets no learned reader's directions.
+        let text = DocumentText {
+            lines: vec!["PIN".into(), "3907".into()],
+            scale: 3,
+            alphabet: "0123456789".into(),
+        };
+        let small = glyphs::render_text(&["PIN", "3907"], 128, 128, 3);
+        let other = KnownFontAttacker::new(&text, 128, 128, 32, 32).unwrap();
+        assert_eq!(LeakPatterns::new(&small, 32, 32, Some(&other), true).len(), 3 + 4 * 9);
         for q in &p.directions {
             let n: f64 = q.iter().map(|v| (*v as f64).powi(2)).sum();
             assert!((n - 1.0).abs() < 1e-5, "norm² {n}");
@@ -203,7 +235,7 @@ mod tests {
     #[test]
     fn the_gradient_image_is_the_penalty_derivative() {
         let (doc, attacker) = pin();
-        let p = LeakPatterns::new(&doc, 32, 32, Some(&attacker));
+        let p = LeakPatterns::new(&doc, 32, 32, Some(&attacker), true);
         let mut s = 7u64;
         let mut rnd = || {
             s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);

@@ -650,7 +650,7 @@ mod tests {
                 image::Rgb([255, 255, 255])
             }
         });
-        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None);
+        let leak = crate::encoding::leak::LeakPatterns::new(&doc, g.width, g.height, None, false);
         assert!(!leak.is_empty());
         let mk = || MultiplexObjective::new(three_terms(&t, &r, &obj_t, &leak), d.n_bands(), energy, 1e-3);
         fd_check(&mk(), &x);
@@ -688,7 +688,7 @@ mod tests {
         let obj_t: Vec<f32> = (0..t.n_pixels() * 3).map(|i| (i % 5) as f32 * 0.1).collect();
         let g = t.grid();
         let doc = image::RgbImage::from_fn(g.width, g.height, |x, _| image::Rgb([if x < 4 { 20 } else { 255 }; 3]));
-        let leak = LeakPatterns::new(&doc, g.width, g.height, None);
+        let leak = LeakPatterns::new(&doc, g.width, g.height, None, false);
         (n, x, v, obj_t, leak)
     }
 

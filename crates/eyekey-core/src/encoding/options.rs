@@ -129,6 +129,12 @@ pub struct EncodeOptions {
     /// ink-box patterns alone, as without a text hint, while the guard and the bystander rounds still judge by the
     /// known-font attacker).
     pub leak_glyphs: bool,
+    /// With `leak_glyphs`, the leak penalty also covers the lead directions of the learned reader shipped for the
+    /// document's layout, where there is one ([`LearnedReader`](crate::evaluation::LearnedReader)). Off by
+    /// default: the evaluation judges with that same reader, and frames fitted against it evade it (on `secure`,
+    /// 4 % of the people at the seat read against 19.7 %) without showing that a reader retrained on such frames
+    /// would fail too (docs/experiments.md §0).
+    pub leak_learned_reader: bool,
     /// The seed of every random choice of the encode: the population decoys, their noise masks, the draws, the
     /// kernels' sub-rays and the checks' people. Absent (the default), a seed is drawn for this encode from the
     /// operating system's CSPRNG ([`EncodeOptions::with_fresh_seed`]), so no two jobs share their decoys' noise
@@ -313,6 +319,7 @@ impl Default for EncodeOptions {
             decoy_weight: None,
             leak_weight: 3.0,
             leak_glyphs: true,
+            leak_learned_reader: false,
             seed: None,
             sub_rays: 16,
             max_iterations: 300,

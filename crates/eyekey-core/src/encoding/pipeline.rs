@@ -862,7 +862,7 @@ impl Cast {
             .map_err(|e| PipelineError::invalid("options.document_text", e.to_string()))?;
         let leak = (o.leak_weight > 0.0).then(|| {
             let glyphs = attacker.as_ref().filter(|_| o.leak_glyphs);
-            LeakPatterns::new(&spec.document, g.width, g.height, glyphs)
+            LeakPatterns::new(&spec.document, g.width, g.height, glyphs, o.leak_learned_reader)
         });
         let moved = head_box_observers(spec, cache)?;
         let focused = target_states(spec)

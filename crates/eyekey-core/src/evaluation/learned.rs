@@ -153,6 +153,21 @@ impl BoundReader {
     pub fn made(&self) -> &str {
         &self.reader.made
     }
+
+    /// What gives each cell's true digit its lead in the reader's arg-max: per cell, its box on the grid (x0, y0,
+    /// width, height) and, for each other digit d, W_true − W_d (row-major in the box). A crop orthogonal to all
+    /// nine, after the reader's mean removal, leaves the true digit no lead but its bias.
+    pub fn discriminants(&self) -> Vec<(crate::evaluation::CellBox, Vec<f32>)> {
+        let mut out = Vec::new();
+        for ((&[x0, y0, w, h], m), &t) in self.reader.cells.iter().zip(&self.reader.models).zip(&self.truth) {
+            let t = t as usize;
+            for d in (0..10).filter(|&d| d != t) {
+                let q = m.weights[t].iter().zip(&m.weights[d]).map(|(a, b)| a - b).collect();
+                out.push(((x0, y0, w, h), q));
+            }
+        }
+        out
+    }
 }
 
 #[cfg(test)]

@@ -30,7 +30,7 @@ use attackers::*;
 pub use bystanders::{guesses_to_read, unwarp, BystanderOptions, BystanderPosition, BystanderSummary};
 pub use contact_sheet::contact_sheet;
 use key_sensitivity::*;
-pub use known_font::{DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
+pub use known_font::{CellBox, DocumentText, KnownFontAttacker, KnownFontError, KnownFontRead};
 pub use learned::{BoundReader, LearnedRead, LearnedReader};
 pub use metrics::*;
 pub use options::EvaluationOptions;
@@ -570,6 +570,24 @@ mod tests {
         (display, document, l)
     }
 
+    /// Options that judge only what is asked beside them, the PIN slip's text known: nobody sampled, no camera, key
+    /// or head scan, 4 sub-rays.
+    fn pin_only() -> EvaluationOptions {
+        EvaluationOptions {
+            population: 0,
+            sub_rays: 4,
+            key_directions: 0,
+            head_offsets_mm: vec![],
+            camera_focus_d: vec![],
+            document_text: Some(DocumentText {
+                lines: PIN_LINES.iter().map(|s| s.to_string()).collect(),
+                scale: 4,
+                alphabet: "0123456789".into(),
+            }),
+            ..Default::default()
+        }
+    }
+
     /// [`evaluate`] of `l` showing `document` on `display`, for a target with perfect eyes and no further
     /// observers.
     fn evaluate_for_perfect_eyes(
@@ -604,16 +622,6 @@ mod tests {
         let (display, document, l) = plain_pin();
         let repeat = 2.0 * display.block_shift_at_pupil_mm(display.viewing_distance_mm);
         let options = EvaluationOptions {
-            population: 0,
-            sub_rays: 4,
-            key_directions: 0,
-            head_offsets_mm: vec![],
-            camera_focus_d: vec![],
-            document_text: Some(DocumentText {
-                lines: PIN_LINES.iter().map(|s| s.to_string()).collect(),
-                scale: 4,
-                alphabet: "0123456789".into(),
-            }),
             bystanders: Some(BystanderOptions {
                 lateral_mm: vec![repeat, 500.0],
                 distances_mm: vec![],
@@ -622,7 +630,7 @@ mod tests {
                 camera_apertures_mm: vec![4.0],
                 ..Default::default()
             }),
-            ..Default::default()
+            ..pin_only()
         };
         let ev = evaluate_for_perfect_eyes(&display, &l, &document, &options, &TransportCache::default());
         let b = ev.report.bystanders.unwrap();
@@ -681,18 +689,8 @@ mod tests {
             .collect();
         let judged = |accommodation: Accommodation| {
             let options = EvaluationOptions {
-                population: 0,
-                sub_rays: 4,
-                key_directions: 0,
-                head_offsets_mm: vec![],
-                camera_focus_d: vec![],
-                document_text: Some(DocumentText {
-                    lines: PIN_LINES.iter().map(|s| s.to_string()).collect(),
-                    scale: 4,
-                    alphabet: "0123456789".into(),
-                }),
                 accommodation,
-                ..Default::default()
+                ..pin_only()
             };
             evaluate(
                 &display,
