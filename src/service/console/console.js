@@ -968,7 +968,7 @@ async function showEvaluation(job, results, labels) {
     h("p", { class: "hint" }, `Legibility: ${report.metric}.`));
 }
 
-/** At which focus a viewer who may refocus was judged: "own focus", "+1.25 D" (nearer) or "—" (not refocusing). */
+/** At which focus a viewer who may refocus was judged: "own focus", "+1.25 D (nearer)", "−0.50 D (farther)", or "—". */
 function focusOf(score) {
   if (typeof score.focus_d !== "number") return "—";
   if (score.focus_d === 0) return "own focus";
