@@ -82,12 +82,15 @@ impl LearnedReader {
         Ok(r)
     }
 
-    /// The readers eyekey ships.
-    pub fn shipped() -> Vec<Self> {
-        SHIPPED
-            .iter()
-            .map(|t| Self::from_json(t).expect("a shipped reader parses"))
-            .collect()
+    /// The readers eyekey ships, parsed once.
+    pub fn shipped() -> &'static [Self] {
+        static READERS: std::sync::OnceLock<Vec<LearnedReader>> = std::sync::OnceLock::new();
+        READERS.get_or_init(|| {
+            SHIPPED
+                .iter()
+                .map(|t| Self::from_json(t).expect("a shipped reader parses"))
+                .collect()
+        })
     }
 
     /// The shipped reader for the document the known-font `attacker` reads on a `grid`-sized retina, when one was
@@ -98,7 +101,7 @@ impl LearnedReader {
         if !digits_only {
             return None;
         }
-        Self::shipped().into_iter().find_map(|reader| {
+        Self::shipped().iter().find_map(|reader| {
             let fits = reader.grid == [grid.0 as usize, grid.1 as usize]
                 && reader.cells.len() == secret.len()
                 && reader
@@ -107,7 +110,7 @@ impl LearnedReader {
                     .zip(&secret)
                     .all(|(c, (_, (x0, y0, w, h)))| *c == [*x0, *y0, *w, *h]);
             fits.then(|| BoundReader {
-                reader,
+                reader: reader.clone(),
                 truth: secret.iter().map(|(ch, _)| *ch as u8 - b'0').collect(),
             })
         })
