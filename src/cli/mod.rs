@@ -214,7 +214,7 @@ pub enum ExperimentCommand {
         #[arg(long)]
         decoys_at_target_pupil: bool,
         /// At which focus the sampled decoys look (`decoy_focus`).
-        #[arg(long, value_enum, default_value = "own")]
+        #[arg(long, value_enum, default_value = "both")]
         decoy_focus: eyekey_core::encoding::pipeline::DecoyFocus,
         /// The leak penalty also covers the shipped learned reader's directions (`leak_learned_reader`).
         #[arg(long)]
@@ -300,7 +300,7 @@ pub enum ExperimentCommand {
         #[arg(long, value_enum, default_value = "standard")]
         security: eyekey_core::encoding::pipeline::Security,
         /// At which focus the sampled decoys look (`decoy_focus`).
-        #[arg(long, value_enum, default_value = "own")]
+        #[arg(long, value_enum, default_value = "both")]
         decoy_focus: eyekey_core::encoding::pipeline::DecoyFocus,
     },
     /// Encode a PIN slip on the `secure` preset and evaluate it against a large population sample.

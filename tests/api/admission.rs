@@ -74,7 +74,8 @@ async fn a_job_over_the_memory_limit_is_refused_with_its_estimate_and_nothing_is
     let body = job_body(&f);
     expect_json(app.op_post("/v1/jobs", &body).await, StatusCode::CREATED).await;
     // A display 16 times as large registers (its cheapest job needs about 100 MiB, most of it the ray bundles
-    // its largest pupils would sample); with 64 decoys its job would need about 600 MiB.
+    // its largest pupils would sample); with 64 decoys, each at its own focus and again refocused, and the
+    // defaults' near-pupil decoys likewise, its job would need about 930 MiB.
     let big = DisplayGeometry {
         holes_x: 48,
         holes_y: 48,
@@ -92,7 +93,7 @@ async fn a_job_over_the_memory_limit_is_refused_with_its_estimate_and_nothing_is
     let error: serde_json::Value = r.json().await.unwrap();
     let message = error["error"]["message"].as_str().unwrap();
     assert!(
-        message.contains("limits of 128 MiB") && message.contains("69 observers"),
+        message.contains("limits of 128 MiB") && message.contains("133 observers"),
         "{message}"
     );
     let jobs = expect_json(app.op_get("/v1/jobs").await, StatusCode::OK).await;

@@ -237,14 +237,20 @@ mod tests {
 
     #[test]
     fn the_paper_preset_by_hand() {
-        // 100×100 holes, 5×5 views, 4 bands: D = 10⁶. Defaults but `strict` (no target states): the target, 6
-        // population decoys and 6 near-pupil decoys, K = 13; `standard`'s four states make it 17.
+        // 100×100 holes, 5×5 views, 4 bands: D = 10⁶. Defaults but `strict` (no target states): the target and
+        // 6 population and 6 near-pupil decoys, each at its own focus and again refocused (`decoy_focus: both`),
+        // K = 1 + 2·12 = 25; `standard`'s four states make it 29. With the decoys at their own focus only, 13.
         let d = DisplayGeometry::paper();
-        let base = EncodeOptions {
+        assert_eq!(footprint(&d, &EncodeOptions::default(), 0).observers, 29);
+        let strict = EncodeOptions {
             security: crate::encoding::options::Security::Strict,
             ..EncodeOptions::default()
         };
-        assert_eq!(footprint(&d, &EncodeOptions::default(), 0).observers, 17);
+        assert_eq!(footprint(&d, &strict, 0).observers, 25);
+        let base = EncodeOptions {
+            decoy_focus: crate::encoding::options::DecoyFocus::Own,
+            ..strict
+        };
         let f = footprint(&d, &base, 0);
         assert_eq!((f.unknowns, f.observers), (1_000_000, 13));
         // Under geometric optics no spectra and no ray bundles.
@@ -327,6 +333,7 @@ mod tests {
             population_decoys: 0,
             near_pupil_decoys: 0,
             security: crate::encoding::options::Security::Strict,
+            decoy_focus: crate::encoding::options::DecoyFocus::Own,
             ..Default::default()
         };
         assert_eq!(bundle_bytes(&d, &alone, 1), (160 << 20) + 14_141_952);
@@ -340,6 +347,12 @@ mod tests {
         };
         let k = |o: &EncodeOptions| encoder_observers(&d, o, 0);
         assert_eq!((k(&few(0.0)), k(&few(0.8))), (7, 13));
+        // Refocused as well (`decoy_focus: both`, the default): each decoy twice.
+        let both = |ring_mm: f64| EncodeOptions {
+            decoy_focus: crate::encoding::options::DecoyFocus::Both,
+            ..few(ring_mm)
+        };
+        assert_eq!((k(&both(0.0)), k(&both(0.8))), (13, 25));
         assert_eq!(
             bundle_bytes(&d, &few(0.0), 7),
             (7 * 663_552 + 2_654_208) * 12 + 2_654_208
@@ -386,10 +399,12 @@ mod tests {
                 holes_y: holes,
                 ..base.clone()
             };
+            // Measured with the decoys at their own focus.
             let o = EncodeOptions {
                 population_decoys: decoys,
                 near_pupil_decoys: 0,
                 security: crate::encoding::options::Security::Strict,
+                decoy_focus: crate::encoding::options::DecoyFocus::Own,
                 ..Default::default()
             };
             let model = footprint(&d, &o, 0).peak_bytes as f64;
@@ -401,7 +416,7 @@ mod tests {
         }
         // Every preset's default encode under `security: strict`, whole (`eyekey encode --display
         // examples/displays/P.json --target examples/profiles/target.json --document
-        // examples/documents/pin_slip.png --security strict`): its 13 observers, and the target alone
+        // examples/documents/pin_slip.png --security strict`, then with decoys at their own focus): its 13 observers, and the target alone
         // (`--population-decoys 0 --near-pupil-decoys 0`). `secure` and `lenslet`
         // hold 84 ray bundles with the decoys (142 MiB), `pinhole` 70 (35 MiB).
         for (d, decoys_kb, alone_kb) in [
@@ -412,8 +427,10 @@ mod tests {
             (DisplayGeometry::small(), 31_604, 17_228),
             (DisplayGeometry::dense(), 212_384, 43_276),
         ] {
+            // Measured with the decoys at their own focus (`decoy_focus: own`).
             let strict = EncodeOptions {
                 security: crate::encoding::options::Security::Strict,
+                decoy_focus: crate::encoding::options::DecoyFocus::Own,
                 ..Default::default()
             };
             let alone = EncodeOptions {

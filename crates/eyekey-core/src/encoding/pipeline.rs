@@ -1789,6 +1789,7 @@ mod tests {
         spec.target.pupil_diameter_mm = 4.3;
         spec.options.adaptive_candidates = 10;
         spec.options.near_pupil_decoys = 0;
+        spec.options.decoy_focus = DecoyFocus::Own;
         let plain = adaptive_candidates(&spec, 1).unwrap();
         assert_eq!(
             plain,
@@ -1813,6 +1814,7 @@ mod tests {
         let mut spec = pin_job(pin_hint());
         spec.options.population_decoys = 12;
         spec.options.adaptive_candidates = 12;
+        spec.options.decoy_focus = DecoyFocus::Own;
         let own = population_decoys(&spec).unwrap();
         let own_candidates = adaptive_candidates(&spec, 1).unwrap();
         spec.options.decoy_focus = DecoyFocus::Target;
@@ -2113,6 +2115,8 @@ mod tests {
             head_weight: weight,
             near_pupil_decoys: 2,
             near_pupil_ring_mm: 0.8,
+            // The figures below were measured with the decoys at their own focus.
+            decoy_focus: DecoyFocus::Own,
             decoy_weight: Some(0.3),
             optics: crate::physics::observer::Optics::Wave,
             ..spec.options
@@ -2685,12 +2689,14 @@ mod tests {
     #[test]
     fn near_pupil_decoys_are_also_looked_at_beside_the_seat() {
         // Two near-pupil decoys at the seat and, with a 0.8 mm ring, again at 0.8 mm right and left (angles 0
-        // and π): four decoys, the ring's copies the same people from elsewhere, who see other light.
+        // and π): four decoys, the ring's copies the same people from elsewhere, who see other light (at their
+        // own focus, so one term each).
         let cast = |ring_mm: f64| {
             pin_cast(|o| EncodeOptions {
                 population_decoys: 0,
                 near_pupil_decoys: 2,
                 near_pupil_ring_mm: ring_mm,
+                decoy_focus: DecoyFocus::Own,
                 ..o
             })
         };
