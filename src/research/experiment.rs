@@ -1049,7 +1049,7 @@ fn secure_setup_rows(md: &mut String, spec: &JobSpec, enc: &Encoded, r: &Report)
 fn secure_population_rows(md: &mut String, p: &PopulationSummary) -> Result<()> {
     writeln!(
         md,
-        "| sampled people who read (the known-font attacker) | {} of {} ({:.1} %, 95 % interval {:.1}–{:.1} %); with at most one digit wrong: {} |",
+        "| sampled people who read (the known-font attacker or the learned reader, at any focus from −1 to +2 D) | {} of {} ({:.1} %, 95 % interval {:.1}–{:.1} %); with at most one digit wrong: {} |",
         p.readable_count,
         p.count,
         100.0 * p.readable_fraction,

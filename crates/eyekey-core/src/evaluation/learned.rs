@@ -2,7 +2,8 @@
 //!
 //! An attacker who knows eyekey can encode PIN slips for sampled targets, simulate what people see of them, and
 //! train a reader on the character cells; measured on fresh encodings, such a reader reads PINs the matched filter
-//! misses. eyekey ships the linear one for the layouts it was trained on (`data/readers/`, made by
+//! misses. eyekey ships the linear one for the layouts it was trained on (`data/readers/`: eyekey's PIN slip on
+//! `secure` and on `lenslet`, made by
 //! `benches/learned_reader/train.py --export` on `eyekey experiment reader-views` output) and the evaluation counts
 //! it: per secret cell, the digit of highest softmax(W·x + b), x the cell's luminance normalised to zero mean and
 //! unit variance (so the view's contrast and the viewer's white do not matter). It applies only to a document
@@ -14,10 +15,16 @@ use serde::{Deserialize, Serialize};
 use crate::evaluation::KnownFontAttacker;
 
 /// The readers eyekey ships, as trained (JSON).
-const SHIPPED: &[&str] = &[include_str!(concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../data/readers/secure-pin-slip.json"
-))];
+const SHIPPED: &[&str] = &[
+    include_str!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/readers/secure-pin-slip.json"
+    )),
+    include_str!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/readers/lenslet-pin-slip.json"
+    )),
+];
 
 /// One cell's linear model over the ten digits.
 #[derive(Clone, Debug, Deserialize)]
@@ -178,54 +185,73 @@ mod tests {
     use super::*;
     use crate::evaluation::DocumentText;
 
-    fn secure_slip(pin: &str) -> (image::RgbImage, DocumentText) {
+    /// eyekey's PIN slip for a display whose retinal grid is `grid` (the document 4 pixels a grid pixel, as
+    /// `eyekey experiment reader-views` draws it).
+    fn slip(grid: [usize; 2], pin: &str) -> (image::RgbImage, DocumentText, KnownFontAttacker) {
+        let (w, h) = (grid[0] as u32 * 4, grid[1] as u32 * 4);
         let text = DocumentText {
             lines: vec!["PIN".into(), pin.into()],
-            scale: 128 / 28,
+            scale: w / 28,
             alphabet: "0123456789".into(),
         };
-        let doc = crate::imaging::glyphs::render_text(&["PIN", pin], 128, 128, text.scale);
-        (doc, text)
+        let doc = crate::imaging::glyphs::render_text(&["PIN", pin], w, h, text.scale);
+        let attacker = KnownFontAttacker::new(&text, w, h, grid[0] as u32, grid[1] as u32).unwrap();
+        (doc, text, attacker)
     }
 
     #[test]
-    fn the_shipped_reader_applies_to_the_secure_pin_slip_it_was_trained_on_and_nothing_else() {
+    fn a_reader_ships_for_the_secure_and_lenslet_pin_slips_and_each_applies_to_its_own_layout_only() {
         let shipped = LearnedReader::shipped();
-        assert_eq!(shipped[0].preset, "secure");
-        let [gw, gh] = shipped[0].grid;
-        let (_, text) = secure_slip("4821");
-        let attacker = KnownFontAttacker::new(&text, 128, 128, gw as u32, gh as u32).unwrap();
-        assert!(LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).is_some());
-        // Another grid, or the slip drawn at another scale, is not the layout it learned.
-        assert!(LearnedReader::for_document(&attacker, (gw as u32 + 8, gh as u32)).is_none());
-        let small = DocumentText {
-            scale: 3,
-            ..text.clone()
-        };
-        let other = KnownFontAttacker::new(&small, 128, 128, gw as u32, gh as u32).unwrap();
-        assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
-        // Letters in the alphabet: not the digits it knows.
-        let letters = DocumentText {
-            alphabet: "0123456789AB".into(),
-            ..text
-        };
-        let other = KnownFontAttacker::new(&letters, 128, 128, gw as u32, gh as u32).unwrap();
-        assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
+        let presets: Vec<&str> = shipped.iter().map(|r| r.preset.as_str()).collect();
+        assert_eq!(presets, ["secure", "lenslet"]);
+        for reader in shipped {
+            let [gw, gh] = reader.grid;
+            let (_, text, attacker) = slip(reader.grid, "4821");
+            let bound = LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).expect("its own layout");
+            assert_eq!(bound.made(), reader.made);
+            // Another grid, or the slip drawn at another scale, is not the layout it learned.
+            assert!(LearnedReader::for_document(&attacker, (gw as u32 + 8, gh as u32)).is_none());
+            let (w, h) = (gw as u32 * 4, gh as u32 * 4);
+            let small = DocumentText {
+                scale: text.scale - 1,
+                ..text.clone()
+            };
+            let other = KnownFontAttacker::new(&small, w, h, gw as u32, gh as u32).unwrap();
+            assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
+            // Letters in the alphabet: not the digits it knows.
+            let letters = DocumentText {
+                alphabet: "0123456789AB".into(),
+                ..text
+            };
+            let other = KnownFontAttacker::new(&letters, w, h, gw as u32, gh as u32).unwrap();
+            assert!(LearnedReader::for_document(&other, (gw as u32, gh as u32)).is_none());
+        }
+        // The two grids differ, so no slip binds the other display's reader.
+        assert_ne!(shipped[0].grid, shipped[1].grid);
     }
 
     #[test]
-    fn the_shipped_reader_reads_the_slip_itself_and_every_pin_is_its_own() {
-        // The plain document on the grid (what a perfect eye on a plain display sees) is read right for PINs it
-        // never saw as a whole, and its reading follows the digits.
-        let reader = &LearnedReader::shipped()[0];
-        let [gw, gh] = reader.grid;
-        for pin in ["4821", "0000", "9517", "3062"] {
-            let (doc, text) = secure_slip(pin);
-            let attacker = KnownFontAttacker::new(&text, 128, 128, gw as u32, gh as u32).unwrap();
-            let bound = LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).unwrap();
-            let view = crate::evaluation::image_luminance(&crate::imaging::resize(&doc, gw as u32, gh as u32));
-            let read = bound.read(&view);
-            assert_eq!((read.text.as_str(), read.correct), (pin, true), "{read:?}");
+    fn each_shipped_reader_reads_the_plain_slip_far_above_chance_and_secure_s_reads_it_whole() {
+        // The plain document on the grid is what a perfect eye on a plain display sees: cleaner than any view a
+        // reader was trained on, so it tests the wiring (cells, order, normalisation), not the reader's skill.
+        // Ten slips put every digit in every cell once. Chance is 4 of 40 digits, and a cell box or a
+        // transposition wrong reads about that; `secure`'s reader reads all 40, `lenslet`'s (trained on fewer
+        // encodings of larger cells) 36, a clean 6 taken for a 3 among them.
+        for reader in LearnedReader::shipped() {
+            let [gw, gh] = reader.grid;
+            let mut right = 0;
+            for first in 0..10u8 {
+                let pin: String = (0..4).map(|k| char::from(b'0' + (first + k) % 10)).collect();
+                let (doc, _, attacker) = slip(reader.grid, &pin);
+                let bound = LearnedReader::for_document(&attacker, (gw as u32, gh as u32)).unwrap();
+                let view = crate::evaluation::image_luminance(&crate::imaging::resize(&doc, gw as u32, gh as u32));
+                let read = bound.read(&view);
+                right += read.characters_right;
+                if reader.preset == "secure" {
+                    assert!(read.correct, "{pin}: {read:?}");
+                }
+            }
+            assert!(right >= 30, "{}: {right} of 40 digits", reader.preset);
         }
     }
 
