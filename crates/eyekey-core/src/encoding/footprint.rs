@@ -416,9 +416,9 @@ mod tests {
         }
         // Every preset's default encode under `security: strict`, whole (`eyekey encode --display
         // examples/displays/P.json --target examples/profiles/target.json --document
-        // examples/documents/pin_slip.png --security strict`, then with decoys at their own focus): its 13 observers, and the target alone
-        // (`--population-decoys 0 --near-pupil-decoys 0`). `secure` and `lenslet`
-        // hold 84 ray bundles with the decoys (142 MiB), `pinhole` 70 (35 MiB).
+        // examples/documents/pin_slip.png --security strict`, measured when the decoys held their own focus by
+        // default): its 13 observers, and the target alone (`--population-decoys 0 --near-pupil-decoys 0`).
+        // `secure` and `lenslet` hold 84 ray bundles with the decoys (142 MiB), `pinhole` 70 (35 MiB).
         for (d, decoys_kb, alone_kb) in [
             (DisplayGeometry::secure(), 209_692u64, 88_352u64),
             (DisplayGeometry::paper(), 187_024, 45_940),
