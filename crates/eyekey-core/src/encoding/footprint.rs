@@ -132,8 +132,9 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
         .saturating_add(unknowns.saturating_mul(per_unknown))
         .saturating_add(observers.saturating_mul(spectra_bytes(display, options)))
         .saturating_add(bundle_bytes(display, options, observers));
-    let evaluated = u64::from(options.evaluation_population)
-        + extra_observers as u64
+    // Each person the evaluation judges may be looked at in every focus state of their accommodation range
+    // (`EvaluationOptions::accommodation`, 13 by default): one who reads at none is judged in all of them.
+    let evaluated = (u64::from(options.evaluation_population) + extra_observers as u64) * evaluation_focus_states()
         + EVALUATION_CAMERA_SETTINGS
         + bystander_scan_settings(display, options)
         + u64::from(options.head_rounds) * u64::from(super::options::HEAD_ROUND_POSITIONS);
@@ -159,6 +160,13 @@ pub fn footprint(display: &DisplayGeometry, options: &EncodeOptions, extra_obser
         peak_bytes,
         seconds,
     }
+}
+
+/// Focus states a person is judged in at most by a job's evaluation: the default accommodation range's.
+fn evaluation_focus_states() -> u64 {
+    crate::physics::accommodation::Accommodation::default()
+        .states(&crate::physics::profile::VisionProfile::perfect())
+        .len() as u64
 }
 
 /// The kernels' spectra and transforms one observer holds under wave optics (see the constants): every view and
@@ -268,7 +276,8 @@ mod tests {
             f.peak_bytes,
             (32 << 20) + 1_000_000 * (72 + 4 * 13) + 13 * 17_280_000 + bundle_bytes(&d, &base, 13)
         );
-        let seconds = 1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0) * 2e-7;
+        // The evaluation: 20 people at up to 13 foci each, and 147 camera settings.
+        let seconds = 1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 * 13.0 + 147.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Two representative observers and a 1 mm head ring of 4 positions add 6 observers.
         let o = EncodeOptions {
@@ -296,7 +305,7 @@ mod tests {
         };
         let f = footprint(&d, &o, 0);
         assert_eq!(f.observers, 13 + 8);
-        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 11_340.0) * 2e-7;
+        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 * 13.0 + 147.0 + 11_340.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Two head-box rounds: up to 4 tracked positions each, and 20 ring positions looked from each.
         let o = EncodeOptions {
@@ -305,7 +314,7 @@ mod tests {
         };
         let f = footprint(&d, &o, 0);
         assert_eq!(f.observers, 13 + 8);
-        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 + 147.0 + 40.0) * 2e-7;
+        let seconds = 1e6 * 21.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (20.0 * 13.0 + 147.0 + 40.0) * 2e-7;
         assert!((f.seconds - seconds).abs() < 1e-9, "{}", f.seconds);
         // Three draws: three solves, each checked with 200 fresh people, the target, 20 ring positions and the
         // camera (27 lenses × 7 channels) at the seat and at its repeat 12.8 mm right, left, above and below
@@ -314,8 +323,8 @@ mod tests {
             draws: 3,
             ..base.clone()
         };
-        let seconds =
-            3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (621.0 + 5.0 * 189.0) * 2e-7) + 1e6 * 167.0 * 2e-7;
+        let seconds = 3.0 * (1e6 * 13.0 * (7e-7 + 2.5e-8 * 300.0) + 1e6 * (621.0 + 5.0 * 189.0) * 2e-7)
+            + 1e6 * (20.0 * 13.0 + 147.0) * 2e-7;
         assert!((footprint(&d, &o, 0).seconds - seconds).abs() < 1e-6);
     }
 
@@ -447,6 +456,26 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn every_person_evaluated_costs_a_look_per_focus_state_of_their_range() {
+        // −1 to +2 D in 0.25 D steps: 13 looks at most for each sampled person, one for each camera setting.
+        assert_eq!(evaluation_focus_states(), 13);
+        let d = DisplayGeometry::secure();
+        let with = |people: u32| {
+            footprint(
+                &d,
+                &EncodeOptions {
+                    evaluation_population: people,
+                    ..Default::default()
+                },
+                0,
+            )
+            .seconds
+        };
+        let per_look = d.n_samples_per_band() as f64 * d.n_bands() as f64 * EVALUATION_SECONDS;
+        assert!((with(100) - with(0) - 100.0 * 13.0 * per_look).abs() < 1e-9 * with(100));
     }
 
     #[test]
