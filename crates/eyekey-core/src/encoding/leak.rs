@@ -178,12 +178,17 @@ mod tests {
     use crate::imaging::glyphs;
 
     fn pin() -> (image::RgbImage, KnownFontAttacker) {
+        pin_at(4)
+    }
+
+    /// The slip "PIN 3907" at font `scale` on a 128×128 page, and its known-font attacker on a 32×32 grid.
+    fn pin_at(scale: u32) -> (image::RgbImage, KnownFontAttacker) {
         let text = DocumentText {
             lines: vec!["PIN".into(), "3907".into()],
-            scale: 4,
+            scale,
             alphabet: "0123456789".into(),
         };
-        let doc = glyphs::render_text(&["PIN", "3907"], 128, 128, 4);
+        let doc = glyphs::render_text(&["PIN", "3907"], 128, 128, scale);
         let attacker = KnownFontAttacker::new(&text, 128, 128, 32, 32).unwrap();
         (doc, attacker)
     }
@@ -197,13 +202,7 @@ mod tests {
         assert_eq!(p.len(), 3 + 4 * 9 + 4 * 9);
         assert_eq!(LeakPatterns::new(&doc, 32, 32, Some(&attacker), false).len(), 3 + 4 * 9);
         // Another layout gets no learned reader's directions.
-        let text = DocumentText {
-            lines: vec!["PIN".into(), "3907".into()],
-            scale: 3,
-            alphabet: "0123456789".into(),
-        };
-        let small = glyphs::render_text(&["PIN", "3907"], 128, 128, 3);
-        let other = KnownFontAttacker::new(&text, 128, 128, 32, 32).unwrap();
+        let (small, other) = pin_at(3);
         assert_eq!(LeakPatterns::new(&small, 32, 32, Some(&other), true).len(), 3 + 4 * 9);
         for q in &p.directions {
             let n: f64 = q.iter().map(|v| (*v as f64).powi(2)).sum();
