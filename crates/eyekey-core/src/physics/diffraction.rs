@@ -288,7 +288,7 @@ impl Cdf {
 /// How far the tabulated distributions reach: x ≤ 60 keeps 99.3 % of the Airy power, |t| ≤ 30 keeps 99.3 % of a
 /// sinc² axis; the rest (wide-angle tails far outside any pupil) is dropped and the tables renormalised.
 const AIRY_X_MAX: f64 = 60.0;
-const SINC_T_MAX: f64 = 30.0;
+pub const SINC_T_MAX: f64 = 30.0;
 const TABLE_STEPS: usize = 24_000;
 
 impl Default for DiffractionSampler {

@@ -95,8 +95,11 @@ pub struct TransportOptions {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SubRaySequence {
-    /// The R₆ Kronecker sequence, shifted at random per view and block (randomised quasi-Monte Carlo).
+    /// Lenslet displays: no sub-rays, a deterministic quadrature over the pupil (docs/design.md §2.7); pinhole
+    /// displays: as [`Self::Kronecker`].
     #[default]
+    Quadrature,
+    /// The R₆ Kronecker sequence, shifted at random per view and block (randomised quasi-Monte Carlo).
     Kronecker,
     /// Independent uniform draws (plain Monte Carlo), for comparison.
     Independent,

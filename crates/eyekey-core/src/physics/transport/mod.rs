@@ -20,6 +20,7 @@ mod csr;
 mod fft;
 mod grid;
 mod kernels;
+mod quadrature;
 pub(crate) mod rng;
 mod shift_invariant;
 mod stencil;
@@ -968,7 +969,7 @@ mod tests {
         // are piecewise linear in W, so the difference is exact except for sub-rays crossing a pixel edge
         // within ±h (a fraction ~4·h·|∂f/∂W| ≈ 0.3 % of them at h = 1e-4 µm) and f32 rounding
         // (~3e-4 relative): relative error 2 % on the whole image.
-        check_derivative(None);
+        check_derivative(tiny(), None);
     }
 
     #[test]
@@ -976,21 +977,87 @@ mod tests {
         // The same check with diffraction and neighbouring blocks: which sub-rays enter the pupil does not
         // depend on W, and the brightness constant is counted at the design pupil, so T stays piecewise
         // linear in W and the same 2 % holds.
-        check_derivative(Some(WaveSampling {
-            wavelength_nm: 550.0,
-            neighbour_blocks: 1,
-            kernel_rays: 0,
-        }));
+        check_derivative(
+            tiny(),
+            Some(WaveSampling {
+                wavelength_nm: 550.0,
+                neighbour_blocks: 1,
+                kernel_rays: 0,
+            }),
+        );
     }
 
     #[test]
     fn with_shift_invariant_kernels_the_derivative_matches_finite_differences() {
         // The kernels' sub-rays are fixed by the seed as the per-sample trace's are: the same argument, 2 %.
-        check_derivative(Some(WaveSampling {
-            wavelength_nm: 550.0,
-            neighbour_blocks: 1,
-            kernel_rays: 512,
-        }));
+        check_derivative(
+            tiny(),
+            Some(WaveSampling {
+                wavelength_nm: 550.0,
+                neighbour_blocks: 1,
+                kernel_rays: 512,
+            }),
+        );
+    }
+
+    #[test]
+    fn with_quadrature_kernels_the_derivative_matches_finite_differences() {
+        // Lenslet kernels by quadrature (the default): every deposit is bilinear in the table, so T is piecewise
+        // linear in W, and ∂T/∂W is the derivative of that interpolation: the same 2 %.
+        check_derivative(
+            tiny_lenslet(),
+            Some(WaveSampling {
+                wavelength_nm: 550.0,
+                neighbour_blocks: 1,
+                kernel_rays: 512,
+            }),
+        );
+    }
+
+    #[test]
+    fn quadrature_kernels_carry_no_sampling_noise_and_are_the_converged_kernels() {
+        // An aberrated 6 mm eye on lenslets at the seat and 2 mm aside: the view of a random light field through
+        // kernels by quadrature, against the mean of two Kronecker builds of 65,536 sub-rays per view and block
+        // (its own error about 0.01 %), relative to the reference's contrast (RMS about its mean). Measured:
+        // quadrature 0.031 % and 0.029 %, the sampled kernels at a job's 682 sub-rays 0.24 % and 0.31 %. Builds
+        // under other seeds are the same bit for bit, and ⟨T·L, y⟩ = ⟨L, Tᵀ·y⟩.
+        let d = tiny_lenslet();
+        let contrast_rms = |a: &[f64], r: &[f64]| {
+            let mean = r.iter().sum::<f64>() / r.len() as f64;
+            let e: f64 = a.iter().zip(r).map(|(x, y)| (x - y).powi(2)).sum();
+            let n: f64 = r.iter().map(|y| (y - mean).powi(2)).sum();
+            (e / n).sqrt()
+        };
+        for eye in [EyePosition::default(), two_mm_aside()] {
+            let a = kernel_view(&d, eye, 65_536, 98, SubRaySequence::Kronecker);
+            let b = kernel_view(&d, eye, 65_536, 99, SubRaySequence::Kronecker);
+            let reference: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 0.5 * (x + y)).collect();
+            let quadrature = kernel_view(&d, eye, 682, 1, SubRaySequence::Quadrature);
+            let sampled = kernel_view(&d, eye, 682, 1, SubRaySequence::Kronecker);
+            let (q, m) = (
+                contrast_rms(&quadrature, &reference),
+                contrast_rms(&sampled, &reference),
+            );
+            assert!(q < 1e-3, "{eye:?}: quadrature {q}");
+            assert!(m > 4.0 * q, "{eye:?}: sampled {m} against quadrature {q}");
+            assert_eq!(
+                quadrature,
+                kernel_view(&d, eye, 682, 12_345, SubRaySequence::Quadrature)
+            );
+        }
+        let opts = TransportOptions {
+            wave: wave(640.0, 1).wave.map(|w| WaveSampling { kernel_rays: 682, ..w }),
+            ..wave(640.0, 1)
+        };
+        let t = TransportMatrix::build(&d, &aberrated(6.0), two_mm_aside(), &opts).unwrap();
+        assert!(t.is_stencil());
+        let l = rand_vec(t.n_samples() * 4, 8);
+        let y = rand_vec(t.n_pixels() * 3, 9);
+        let (mut tl, mut ty) = (vec![0f32; t.n_pixels() * 3], vec![0f32; t.n_samples() * 4]);
+        t.forward_lms(&l, &coupling4(), &mut tl);
+        t.adjoint_lms(&y, &coupling4(), &mut ty);
+        let (lhs, rhs) = (dot(&tl, &y), dot(&l, &ty));
+        assert!((lhs - rhs).abs() <= 1e-5 * lhs.abs(), "{lhs} {rhs}");
     }
 
     #[test]
@@ -1091,8 +1158,7 @@ mod tests {
         }
     }
 
-    fn check_derivative(wave: Option<WaveSampling>) {
-        let d = tiny();
+    fn check_derivative(d: DisplayGeometry, wave: Option<WaveSampling>) {
         let base = aberrated(6.0);
         let terms = vec![4, 5, 7, 12];
         let opts = TransportOptions {

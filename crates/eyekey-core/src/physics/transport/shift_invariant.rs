@@ -26,20 +26,20 @@ use crate::physics::zernike::GRADIENT_BATCH;
 
 /// One tap of a view's kernel: the offset (retinal pixels) from the sample's block origin, its weight and
 /// its ∂/∂W_j per derivative term.
-struct Tap {
-    dx: i32,
-    dy: i32,
-    w: f32,
-    dw: Vec<f32>,
+pub(super) struct Tap {
+    pub(super) dx: i32,
+    pub(super) dy: i32,
+    pub(super) w: f32,
+    pub(super) dw: Vec<f32>,
 }
 
 /// What one view's kernel trace found.
-struct ViewKernel {
-    taps: Vec<Tap>,
-    traced: u64,
-    in_pupil: u64,
+pub(super) struct ViewKernel {
+    pub(super) taps: Vec<Tap>,
+    pub(super) traced: u64,
+    pub(super) in_pupil: u64,
     /// The light that entered the pupil, in sub-rays' worth (each weighted by its sampling weight).
-    power: f64,
+    pub(super) power: f64,
 }
 
 /// Points spread evenly over the unit pupil disc (a sunflower pattern: radius √((r + ½)/N), golden-angle
@@ -203,7 +203,7 @@ impl PinholeBatch<'_> {
 
 /// A view's kernel accumulated on a dense box of retinal offsets, with a sorted overflow list for the rare
 /// landing outside it.
-struct KernelBox {
+pub(super) struct KernelBox {
     x0: i64,
     y0: i64,
     width: i64,
@@ -215,7 +215,7 @@ struct KernelBox {
 }
 
 impl KernelBox {
-    fn new(x: (i64, i64), y: (i64, i64), n_terms: usize) -> Self {
+    pub(super) fn new(x: (i64, i64), y: (i64, i64), n_terms: usize) -> Self {
         let (width, height) = (x.1 - x.0 + 1, y.1 - y.0 + 1);
         let cells = (width * height) as usize;
         Self {
@@ -269,8 +269,26 @@ impl KernelBox {
         }
     }
 
+    /// Adds weight `w` and derivative weights `dw` (per term) at offset (x, y).
+    #[inline]
+    pub(super) fn add(&mut self, x: i64, y: i64, w: f64, dw: &[f64]) {
+        let (cx, cy) = (x - self.x0, y - self.y0);
+        if cx >= 0 && cy >= 0 && cx < self.width && cy < self.height {
+            let cell = (cy * self.width + cx) as usize;
+            self.w[cell] += w;
+            for (acc, d) in self.dw[cell * self.n_terms..(cell + 1) * self.n_terms]
+                .iter_mut()
+                .zip(dw)
+            {
+                *acc += d;
+            }
+        } else {
+            self.overflow.push((x, y, w, dw.to_vec()));
+        }
+    }
+
     /// The non-zero taps, sorted by (dy, dx).
-    fn taps(self) -> Vec<Tap> {
+    pub(super) fn taps(self) -> Vec<Tap> {
         let n_terms = self.n_terms;
         let mut taps: Vec<Tap> = Vec::new();
         for cy in 0..self.height {
@@ -371,7 +389,7 @@ fn bundle_cache() -> &'static std::sync::Mutex<BundleCache> {
 
 impl Tracer<'_> {
     /// View (i, j)'s screen pixel relative to its block's centre, mm.
-    fn view_offset(&self, i: u32, j: u32) -> [f64; 2] {
+    pub(super) fn view_offset(&self, i: u32, j: u32) -> [f64; 2] {
         let d = self.display;
         [
             (i as f64 - (d.views_u as f64 - 1.0) / 2.0) * d.screen_pixel_pitch_mm,
@@ -523,7 +541,8 @@ impl Tracer<'_> {
                 let mut draws = self.block_draws(view, mx, my);
                 // Rays in proportion to an upper bound on the block's power in the pupil (from the stray
                 // crossing nearest the pupil's centre), at least 16: every block keeps at least as many rays in
-                // the pupil as draws of the whole pattern would have put there, and each carries its power.
+                // the pupil as draws of the whole pattern would have put there, and each carries its power times
+                // the draws it stands for (`rays` / `block_rays`), so that a thinned block is not dimmed.
                 let nominal = |m: i64, o: f64, e: f64| self.d_eye * (-(m as f64) * pitch * aim - o) / d.gap_mm - e;
                 let nearest = |c: f64| c.signum() * (c.abs() - stray).max(0.0);
                 let bound = sampler.pupil_power_bound(
@@ -538,6 +557,8 @@ impl Tracer<'_> {
                     r_s,
                 );
                 let block_rays = ((rays as f64 * bound).ceil() as u32).clamp(16.min(rays), rays);
+                // Fewer rays stand for the block's `rays`: each carries their share of its power.
+                let thinned = rays as f64 / block_rays as f64;
                 for _ in 0..block_rays {
                     traced += 1;
                     let r = draws.next_ray();
@@ -560,7 +581,7 @@ impl Tracer<'_> {
                             (chief[0] + self.d_eye * theta[0]) as f32,
                             (chief[1] + self.d_eye * theta[1]) as f32,
                         ],
-                        w: w as f32,
+                        w: (w * thinned) as f32,
                     });
                 }
             }
@@ -785,6 +806,9 @@ impl Tracer<'_> {
     /// Every view's kernel, each landing weighted so that a plain image is seen at its own intensity from
     /// the design position (the eye adapted to the display; docs/design.md §2.7).
     fn view_kernels(&self, rays: u32) -> Vec<ViewKernel> {
+        if self.uses_quadrature() {
+            return self.quadrature_kernels();
+        }
         let d = self.display;
         let views: Vec<(u32, u32)> = (0..d.views_v)
             .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))

@@ -1,0 +1,774 @@
+//! Lenslet kernels by deterministic quadrature (docs/design.md §2.7): no sub-ray is drawn, so the same eye, display
+//! and wavelength always give the same kernels, and they carry no sampling noise.
+//!
+//! A lenslet collimates: the light of sample (view v, block m over) that leaves the lenslet at u (uniform over
+//! its side A) crosses the pupil plane at P = u + c + q, where c is the chief ray's crossing
+//! ([`super::shift_invariant`]) and q = −(d/g)·j + d·θ is independent of u: the screen pixel's box (width
+//! w = p_s·d/g at the pupil) convolved with the lenslet's Fraunhofer pattern, sinc² per axis with d·θ in units of
+//! b = λ·d/A. Per axis q has the density r(q) = [F((q + w/2)/b) − F((q − w/2)/b)]/w, F the sinc² cumulative
+//! ([`DiffractionSampler::sinc_cdf`], the table the sampled kernels draw from). The sub-ray lands at
+//! f = (u − m·p_h)/pix + s(P), s = d·∇W(P) in retinal pixels (Eq. 9), and is splatted bilinearly. So a view's
+//! kernel is
+//!
+//! K(X, Y) = ∫_pupil dP Π_axis (1/A)∫ du r(P − u − c) hat(f(u, P) − X),
+//!
+//! and because u, r and the bilinear hat all factor per axis, the inner integral is a product of two one-axis
+//! deposits D(δ, φ)[i], δ = P − c, φ the fractional landing of the lenslet's edge, i the tap. D is exact in
+//! closed form from r's first two antiderivatives (the hat is linear between its kinks), tabulated once per
+//! display, wavelength and distance ([`AxisTable`]). The pupil integral is a midpoint rule over square cells
+//! (cells cut by the pupil's edge carry their area inside it and its centroid); r is band-limited to spatial
+//! frequencies below 1/b, for which the midpoint rule is exact once the cells are finer than b, so cells of b/2
+//! leave the pupil's edge and the wavefront's curvature as the only error. Away from a view's core (its lenslet,
+//! screen pixel and three diffraction orders), where only the smooth tails of r reach, cells of four by four are
+//! taken as one.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use rayon::prelude::*;
+
+use super::shift_invariant::{KernelBox, ViewKernel};
+use super::trace::{floor, Tracer};
+use crate::physics::diffraction::DiffractionSampler;
+use crate::physics::transport::EyePosition;
+
+/// Table nodes per retinal pixel of the landing's fraction φ.
+const PHI_STEPS: usize = 32;
+/// Fine cells per coarse cell along each axis.
+const COARSE: usize = 4;
+/// Fine cells per unit of b (the sinc² pattern's first zero at the pupil).
+const CELLS_PER_B: f64 = 1.0;
+/// The most a fine cell may move the landing across it, retinal pixels: where the wavefront curves faster the cells
+/// are halved, up to MAX_HALVINGS times.
+const MAX_SHIFT_PER_CELL: f64 = 0.25;
+const MAX_HALVINGS: usize = 3;
+/// Table nodes of δ per fine cell (even).
+const NODES_PER_CELL: usize = 12;
+/// The most memory the process's axis tables may hold; the oldest go first.
+const TABLE_CACHE_BYTES: usize = 64 << 20;
+
+/// One axis of a lenslet's light, as the quadrature needs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct AxisGeometry {
+    /// The lenslet's side A, mm.
+    pub a: f64,
+    /// The screen pixel's width at the pupil, w = p_s·d/g, mm.
+    pub w: f64,
+    /// Pupil-plane millimetres per unit of the sinc² coordinate, b = λ·d/A.
+    pub b: f64,
+    /// A retinal pixel, mm.
+    pub pix: f64,
+    /// The pupil cells' side, mm: the table holds each deposit averaged over a cell.
+    pub cell: f64,
+}
+
+impl AxisGeometry {
+    /// The half-width of δ beyond which no light lands: the sinc² table's reach, the screen pixel and the
+    /// lenslet.
+    fn reach(&self) -> f64 {
+        crate::physics::diffraction::SINC_T_MAX * self.b + 0.5 * (self.w + self.a)
+    }
+
+    /// Taps of one deposit: the lenslet spans A/pix retinal pixels, and a bilinear hat reaches one either side.
+    fn taps(&self) -> usize {
+        (self.a / self.pix - 1e-9).ceil().max(0.0) as usize + 2
+    }
+
+    /// The half-width of a view's core in δ: its lenslet, its screen pixel and two diffraction orders.
+    fn core(&self) -> f64 {
+        0.5 * (self.a + self.w) + 2.0 * self.b
+    }
+}
+
+/// D(δ, φ)[i] on a grid of δ (uniform over ±reach) and φ ∈ [0, 1] (both ends), with r's marginal
+/// through the lenslet, r_A(δ) = Σ_i D(δ, φ)[i] = (1/A)∫ r(δ − u) du.
+pub(super) struct AxisTable {
+    geometry: AxisGeometry,
+    d0: f64,
+    per_mm: f64,
+    n_delta: usize,
+    taps: usize,
+    /// `[δ][φ][tap]`.
+    w: Vec<f32>,
+    power: Vec<f64>,
+}
+
+/// r's antiderivatives on a fine grid: R₁(q) = ∫ r, R₂(q) = ∫ R₁, for ∫ r and ∫ q·r over any interval.
+struct Antiderivatives {
+    q0: f64,
+    per_q: f64,
+    r1: Vec<f64>,
+    r2: Vec<f64>,
+}
+
+impl Antiderivatives {
+    fn new(g: &AxisGeometry, sampler: &DiffractionSampler, reach: f64) -> Self {
+        let dq = g.b.min(g.w).min(g.a) / 64.0;
+        let q0 = -reach - g.a;
+        let n = ((2.0 * (reach + g.a)) / dq).ceil() as usize + 1;
+        let r = |q: f64| (sampler.sinc_cdf((q + 0.5 * g.w) / g.b) - sampler.sinc_cdf((q - 0.5 * g.w) / g.b)) / g.w;
+        let (mut r1, mut r2) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let (mut prev, mut acc1, mut acc2) = (r(q0), 0.0, 0.0);
+        r1.push(0.0);
+        r2.push(0.0);
+        for k in 1..n {
+            let v = r(q0 + k as f64 * dq);
+            let next1 = acc1 + 0.5 * (prev + v) * dq;
+            acc2 += 0.5 * (acc1 + next1) * dq;
+            acc1 = next1;
+            prev = v;
+            r1.push(acc1);
+            r2.push(acc2);
+        }
+        Self {
+            q0,
+            per_q: 1.0 / dq,
+            r1,
+            r2,
+        }
+    }
+
+    /// (R₁(q), R₂(q)), linearly interpolated (constant before the grid, extrapolated past it: r is 0 there).
+    fn at(&self, q: f64) -> (f64, f64) {
+        let f = (q - self.q0) * self.per_q;
+        let n = self.r1.len() - 1;
+        if f <= 0.0 {
+            return (0.0, 0.0);
+        }
+        if f >= n as f64 {
+            let past = (f - n as f64) / self.per_q;
+            return (self.r1[n], self.r2[n] + self.r1[n] * past);
+        }
+        let k = f as usize;
+        let t = f - k as f64;
+        (
+            self.r1[k] + t * (self.r1[k + 1] - self.r1[k]),
+            self.r2[k] + t * (self.r2[k + 1] - self.r2[k]),
+        )
+    }
+
+    /// (∫_lo^hi r(q) dq, ∫_lo^hi q·r(q) dq), the second by parts: [q·R₁ − R₂].
+    fn moments(&self, lo: f64, hi: f64) -> (f64, f64) {
+        let ((a1, a2), (b1, b2)) = (self.at(lo), self.at(hi));
+        (b1 - a1, (hi * b1 - b2) - (lo * a1 - a2))
+    }
+}
+
+impl AxisTable {
+    /// Tabulates the deposits for `g`, each averaged over a cell of `g.cell` (a few milliseconds).
+    pub(super) fn new(g: AxisGeometry, sampler: &DiffractionSampler) -> Self {
+        let reach = g.reach();
+        let anti = Antiderivatives::new(&g, sampler, reach + g.cell);
+        let step = g.cell / NODES_PER_CELL as f64;
+        let n_delta = (2.0 * reach / step).ceil() as usize + 1;
+        let taps = g.taps();
+        let stride = (PHI_STEPS + 1) * taps;
+        let span = g.a / g.pix;
+        // Point values on a grid half a cell wider each side, then their trapezoidal mean over each cell.
+        let half = NODES_PER_CELL / 2;
+        let n_point = n_delta + 2 * half;
+        let mut pw = vec![0f64; n_point * stride];
+        let mut ppower = vec![0f64; n_point];
+        pw.par_chunks_mut(stride)
+            .zip(ppower.par_iter_mut())
+            .enumerate()
+            .for_each(|(k, (w, power))| {
+                let delta = -reach + (k as f64 - half as f64) * step;
+                *power = anti.moments(delta - 0.5 * g.a, delta + 0.5 * g.a).0 / g.a;
+                for p in 0..=PHI_STEPS {
+                    let phi = p as f64 / PHI_STEPS as f64;
+                    for i in 0..taps {
+                        w[p * taps + i] = Self::deposit(&anti, &g, delta, phi, span, i as f64);
+                    }
+                }
+            });
+        let mean = |k: usize, j: usize, v: &[f64], stride: usize| {
+            let mut acc = 0.5 * (v[k * stride + j] + v[(k + 2 * half) * stride + j]);
+            for m in k + 1..k + 2 * half {
+                acc += v[m * stride + j];
+            }
+            acc / (2 * half) as f64
+        };
+        let mut w = vec![0f32; n_delta * stride];
+        let mut power = vec![0f64; n_delta];
+        for k in 0..n_delta {
+            for j in 0..stride {
+                w[k * stride + j] = mean(k, j, &pw, stride) as f32;
+            }
+            power[k] = mean(k, 0, &ppower, 1);
+        }
+        Self {
+            geometry: g,
+            d0: -reach,
+            per_mm: 1.0 / step,
+            n_delta,
+            taps,
+            w,
+            power,
+        }
+    }
+
+    /// D(δ, φ)[i] in closed form: the lenslet's u ∈ [−A/2, A/2] lands at x = φ + (u + A/2)/pix, and the
+    /// hat of tap i is x − i + 1 on [i − 1, i] and i + 1 − x on [i, i + 1], linear in u on each piece, so each
+    /// piece is (c₀ + c₁δ)·∫r − c₁·∫q·r over q = δ − u.
+    fn deposit(anti: &Antiderivatives, g: &AxisGeometry, delta: f64, phi: f64, span: f64, i: f64) -> f64 {
+        let mut value = 0.0;
+        for (x_lo, x_hi, sign) in [(i - 1.0, i, 1.0), (i, i + 1.0, -1.0)] {
+            let (lo, hi) = (x_lo.max(phi), x_hi.min(phi + span));
+            if hi <= lo {
+                continue;
+            }
+            let (u0, u1) = ((lo - phi) * g.pix - 0.5 * g.a, (hi - phi) * g.pix - 0.5 * g.a);
+            // hat = c₀ + c₁·u on this piece.
+            let c1 = sign / g.pix;
+            let c0 = if sign > 0.0 {
+                phi + 0.5 * g.a / g.pix - i + 1.0
+            } else {
+                i + 1.0 - phi - 0.5 * g.a / g.pix
+            };
+            let (m0, m1) = anti.moments(delta - u1, delta - u0);
+            value += (c0 + c1 * delta) * m0 - c1 * m1;
+        }
+        value / g.a
+    }
+
+    fn bytes(&self) -> usize {
+        self.w.len() * 4 + self.power.len() * 8 + std::mem::size_of::<Self>()
+    }
+
+    /// The node below δ and the fraction past it, or `None` outside the table (no light lands there).
+    #[inline]
+    fn locate(&self, delta: f64) -> Option<(usize, f64)> {
+        let f = (delta - self.d0) * self.per_mm;
+        if !(f >= 0.0 && f < (self.n_delta - 1) as f64) {
+            return None;
+        }
+        let k = f as usize;
+        Some((k, f - k as f64))
+    }
+
+    /// r_A(δ): the light of one axis through the lenslet at δ from the chief crossing, per mm.
+    #[inline]
+    fn power_at(&self, delta: f64) -> f64 {
+        self.locate(delta)
+            .map_or(0.0, |(k, t)| self.power[k] + t * (self.power[k + 1] - self.power[k]))
+    }
+
+    /// The deposit's taps at δ and φ = (node `p` + fraction `s`)/PHI_STEPS, bilinear in the table, into `w`;
+    /// with `slopes`, their derivative in φ into `dw`: that of the bilinear interpolation, so that ∂T/∂W is the
+    /// exact derivative of the operator as built.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn lookup(
+        &self,
+        delta: f64,
+        p: usize,
+        s: f64,
+        slopes: bool,
+        w: &mut [f64; MAX_TAPS],
+        dw: &mut [f64; MAX_TAPS],
+    ) -> bool {
+        let Some((k, t)) = self.locate(delta) else {
+            return false;
+        };
+        let taps = self.taps;
+        let stride = (PHI_STEPS + 1) * taps;
+        let (lo, hi) = (k * stride + p * taps, (k + 1) * stride + p * taps);
+        for i in 0..taps {
+            let at = |o: usize| (1.0 - t) * self.w[lo + o + i] as f64 + t * self.w[hi + o + i] as f64;
+            let (a, b) = (at(0), at(taps));
+            w[i] = a + s * (b - a);
+            if slopes {
+                dw[i] = (b - a) * PHI_STEPS as f64;
+            }
+        }
+        true
+    }
+}
+
+/// The most taps a deposit may have (a lenslet wider than six retinal pixels is refused by the caller).
+pub(super) const MAX_TAPS: usize = 8;
+
+#[derive(Default)]
+struct TableCache {
+    map: HashMap<String, Arc<AxisTable>>,
+    order: VecDeque<String>,
+    bytes: usize,
+}
+
+/// The process's table for `g` (tabulated on first use, shared by every person and band at that wavelength).
+pub(super) fn axis_table(g: AxisGeometry, sampler: &DiffractionSampler) -> Arc<AxisTable> {
+    static CACHE: OnceLock<Mutex<TableCache>> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    let key = format!("{:?}", g);
+    if let Some(t) = cache.lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
+        return t.clone();
+    }
+    let table = Arc::new(AxisTable::new(g, sampler));
+    let mut c = cache.lock().unwrap_or_else(|e| e.into_inner());
+    if !c.map.contains_key(&key) && table.bytes() <= TABLE_CACHE_BYTES {
+        c.bytes += table.bytes();
+        c.map.insert(key.clone(), table.clone());
+        c.order.push_back(key);
+        while c.bytes > TABLE_CACHE_BYTES {
+            let Some(old) = c.order.pop_front() else { break };
+            if let Some(t) = c.map.remove(&old) {
+                c.bytes -= t.bytes();
+            }
+        }
+    }
+    table
+}
+
+/// One cell of the pupil: its area inside the pupil (mm²), that area's centroid (mm) and the landing shift there
+/// (retinal pixels), with the φ node and base pixel the shift gives a deposit's first tap before the block's
+/// offset.
+#[derive(Clone, Copy, Default)]
+struct Cell {
+    area: f64,
+    p: [f64; 2],
+    shift: [f64; 2],
+}
+
+/// The pupil's cells, fine and coarse (each coarse cell COARSE × COARSE fine ones, its area, centroid and mean
+/// shift), with every cell's landing shift per derivative term.
+struct PupilCells {
+    fine: Vec<Cell>,
+    fine_terms: Vec<[f64; 2]>,
+    coarse: Vec<(Cell, [f64; 2], [f64; 2], std::ops::Range<usize>)>,
+    coarse_terms: Vec<[f64; 2]>,
+    max_shift: f64,
+}
+
+impl PupilCells {
+    /// Cells of side `h` over a pupil of radius `tracer.r_p`, each with its share of the disc (8 × 8 points where
+    /// the edge crosses it), ordered coarse cell by coarse cell.
+    fn new(tracer: &Tracer<'_>, h: f64, with_shift: bool) -> Self {
+        let r_p = tracer.r_p;
+        let n_coarse = ((2.0 * r_p / h).ceil() as usize).div_ceil(COARSE);
+        let origin = -0.5 * (n_coarse * COARSE) as f64 * h;
+        let n_terms = tracer.term_polys.len();
+        let k = tracer.shift_per_grad;
+        let (mut fine, mut fine_terms, mut coarse, mut coarse_terms) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut max_shift = 0f64;
+        let r2 = r_p * r_p;
+        for cy in 0..n_coarse {
+            for cx in 0..n_coarse {
+                let start = fine.len();
+                let (mut area, mut moment, mut shift) = (0.0, [0.0; 2], [0.0; 2]);
+                let mut terms = vec![[0.0; 2]; n_terms];
+                for fy in 0..COARSE {
+                    for fx in 0..COARSE {
+                        let lo = [
+                            origin + (cx * COARSE + fx) as f64 * h,
+                            origin + (cy * COARSE + fy) as f64 * h,
+                        ];
+                        let Some((a, p)) = disc_share(lo, h, r_p, r2) else {
+                            continue;
+                        };
+                        let (s, t) = if with_shift {
+                            let g = tracer.poly.gradient(p[0] / r_p, p[1] / r_p);
+                            let t: Vec<[f64; 2]> = tracer
+                                .term_polys
+                                .iter()
+                                .map(|tp| {
+                                    let g = tp.gradient(p[0] / r_p, p[1] / r_p);
+                                    [k * g[0], k * g[1]]
+                                })
+                                .collect();
+                            ([k * g[0], k * g[1]], t)
+                        } else {
+                            ([0.0; 2], vec![[0.0; 2]; n_terms])
+                        };
+                        max_shift = max_shift.max(s[0].abs()).max(s[1].abs());
+                        area += a;
+                        for n in 0..2 {
+                            moment[n] += a * p[n];
+                            shift[n] += a * s[n];
+                        }
+                        for (acc, v) in terms.iter_mut().zip(&t) {
+                            acc[0] += a * v[0];
+                            acc[1] += a * v[1];
+                        }
+                        fine.push(Cell { area: a, p, shift: s });
+                        fine_terms.extend(t);
+                    }
+                }
+                if area > 0.0 {
+                    let lo = [origin + (cx * COARSE) as f64 * h, origin + (cy * COARSE) as f64 * h];
+                    let hi = [lo[0] + COARSE as f64 * h, lo[1] + COARSE as f64 * h];
+                    let cell = Cell {
+                        area,
+                        p: [moment[0] / area, moment[1] / area],
+                        shift: [shift[0] / area, shift[1] / area],
+                    };
+                    coarse.push((cell, lo, hi, start..fine.len()));
+                    coarse_terms.extend(terms.iter().map(|t| [t[0] / area, t[1] / area]));
+                }
+            }
+        }
+        Self {
+            fine,
+            fine_terms,
+            coarse,
+            coarse_terms,
+            max_shift,
+        }
+    }
+}
+
+impl PupilCells {
+    /// Whether the coarse cell [lo, hi] reaches a view's core (half-width `core` about its chief crossing `c`),
+    /// where its fine cells are taken one by one.
+    #[inline]
+    fn near(&self, lo: &[f64; 2], hi: &[f64; 2], c: [f64; 2], core: f64) -> bool {
+        (0..2).all(|n| hi[n] >= c[n] - core && lo[n] <= c[n] + core)
+    }
+}
+
+/// The area of the square [lo, lo + h]² inside the disc of radius `r` (r² = `r2`) and its centroid: whole or
+/// none where the square lies clear of the edge, else from 8 × 8 points.
+fn disc_share(lo: [f64; 2], h: f64, r: f64, r2: f64) -> Option<(f64, [f64; 2])> {
+    let centre = [lo[0] + 0.5 * h, lo[1] + 0.5 * h];
+    let dist = centre[0].hypot(centre[1]);
+    let half_diagonal = h * std::f64::consts::FRAC_1_SQRT_2;
+    if dist + half_diagonal <= r {
+        return Some((h * h, centre));
+    }
+    if dist - half_diagonal >= r {
+        return None;
+    }
+    const N: usize = 8;
+    let (mut count, mut sum) = (0usize, [0.0; 2]);
+    for j in 0..N {
+        for i in 0..N {
+            let p = [
+                lo[0] + (i as f64 + 0.5) * h / N as f64,
+                lo[1] + (j as f64 + 0.5) * h / N as f64,
+            ];
+            if p[0] * p[0] + p[1] * p[1] <= r2 {
+                count += 1;
+                sum[0] += p[0];
+                sum[1] += p[1];
+            }
+        }
+    }
+    (count > 0).then(|| {
+        (
+            h * h * count as f64 / (N * N) as f64,
+            [sum[0] / count as f64, sum[1] / count as f64],
+        )
+    })
+}
+
+impl Tracer<'_> {
+    /// The geometry of one axis of this display's lenslets at this wavelength and distance.
+    fn axis_geometry(&self) -> AxisGeometry {
+        let d = self.display;
+        let lambda_mm = self.options.wave.expect("a wave-optics build").wavelength_nm * 1e-6;
+        AxisGeometry {
+            a: d.hole_diameter_mm,
+            w: d.screen_pixel_pitch_mm * self.d_eye / d.gap_mm,
+            b: lambda_mm * self.d_eye / d.hole_diameter_mm,
+            pix: self.grid.pixel_mm,
+            cell: lambda_mm * self.d_eye / d.hole_diameter_mm / CELLS_PER_B,
+        }
+    }
+
+    /// Whether this build's kernels are made by quadrature: a lenslet display whose lenslet spans at most six
+    /// retinal pixels, with the quadrature asked for.
+    pub(super) fn uses_quadrature(&self) -> bool {
+        self.display.aperture == crate::physics::display::Aperture::Lenslet
+            && self.options.sequence == super::SubRaySequence::Quadrature
+            && self.axis_geometry().taps() <= MAX_TAPS
+    }
+
+    /// The chief crossing c of view (i, j) from the block `m` over, and the blocks whose light can reach.
+    fn chief(&self, off: [f64; 2], m: [i64; 2]) -> [f64; 2] {
+        let d = self.display;
+        let aim = 1.0 + d.gap_mm / d.viewing_distance_mm;
+        let eye = [self.eye.x_mm, self.eye.y_mm];
+        std::array::from_fn(|n| self.d_eye * (-(m[n] as f64) * d.hole_pitch_mm * aim - off[n]) / d.gap_mm - eye[n])
+    }
+
+    /// The window of blocks around the eye's: the same as the sampled kernels'.
+    fn quadrature_window(&self) -> ([i64; 2], i64) {
+        let d = self.display;
+        let wave = self.options.wave.expect("a wave-optics build");
+        let nb = wave.neighbour_blocks.max(crate::physics::observer::neighbour_blocks(
+            d,
+            wave.wavelength_nm,
+            2.0 * self.r_p,
+            self.eye,
+        )) as i64;
+        let per_block = d.block_shift_at_pupil_mm(self.d_eye);
+        let centre = |e: f64| (-e / per_block).round() as i64;
+        ([centre(self.eye.x_mm), centre(self.eye.y_mm)], nb)
+    }
+
+    /// The light that enters the pupil from every view through every block of the window (the power the
+    /// kernels are normalised by, docs/design.md §2.7), in the kernels' units.
+    fn quadrature_power(&self, cells: &PupilCells, table: &AxisTable) -> f64 {
+        let d = self.display;
+        let ([kx, ky], nb) = self.quadrature_window();
+        let core = table.geometry.core();
+        let views: Vec<(u32, u32)> = (0..d.views_v)
+            .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
+            .collect();
+        views
+            .par_iter()
+            .map(|&(i, j)| {
+                let off = self.view_offset(i, j);
+                let mut power = 0.0;
+                for my in ky - nb..=ky + nb {
+                    for mx in kx - nb..=kx + nb {
+                        let c = self.chief(off, [mx, my]);
+                        let at = |cell: &Cell| {
+                            cell.area * table.power_at(cell.p[0] - c[0]) * table.power_at(cell.p[1] - c[1])
+                        };
+                        for (cell, lo, hi, fine) in &cells.coarse {
+                            if cells.near(lo, hi, c, core) {
+                                power += cells.fine[fine.clone()].iter().map(at).sum::<f64>();
+                            } else {
+                                power += at(cell);
+                            }
+                        }
+                    }
+                }
+                power
+            })
+            .sum()
+    }
+
+    /// View (i, j)'s kernel by quadrature (module documentation), unnormalised: taps keyed relative to the
+    /// block's first retinal pixel, `power` the light that entered.
+    fn quadrature_view(&self, i: u32, j: u32, cells: &PupilCells, table: &AxisTable) -> ViewKernel {
+        let d = self.display;
+        let g = table.geometry;
+        let k = self.options.retina_oversample as f64;
+        let pitch = d.hole_pitch_mm;
+        let off = self.view_offset(i, j);
+        let ([kx, ky], nb) = self.quadrature_window();
+        let n_terms = self.term_polys.len();
+        let taps = table.taps;
+        // The box holding every landing: the window's blocks, the lenslet, the largest aberration shift.
+        let reach = cells.max_shift + 2.0;
+        let bounds = |kc: i64| {
+            let lo = (k - 1.0) / 2.0 + (-0.5 * g.a - (kc + nb) as f64 * pitch) / g.pix - reach;
+            let hi = (k - 1.0) / 2.0 + (0.5 * g.a - (kc - nb) as f64 * pitch) / g.pix + reach;
+            (lo.floor() as i64, hi.ceil() as i64 + 1)
+        };
+        let mut kernel = KernelBox::new(bounds(kx), bounds(ky), n_terms);
+        let core = g.core();
+        let (mut evaluated, mut power) = (0u64, 0f64);
+        let mut dfs = vec![0.0; n_terms];
+        let slopes = n_terms > 0;
+        let (mut wx, mut dwx, mut wy, mut dwy) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS], [0.0; MAX_TAPS], [0.0; MAX_TAPS]);
+        for my in ky - nb..=ky + nb {
+            for mx in kx - nb..=kx + nb {
+                let c = self.chief(off, [mx, my]);
+                // The lenslet's edge lands at t = (k − 1)/2 + (−A/2 − m·p_h)/pix + s(P).
+                let edge = [
+                    (k - 1.0) / 2.0 + (-0.5 * g.a - mx as f64 * pitch) / g.pix,
+                    (k - 1.0) / 2.0 + (-0.5 * g.a - my as f64 * pitch) / g.pix,
+                ];
+                let mut deposit = |cell: &Cell, terms: &[[f64; 2]], kernel: &mut KernelBox| {
+                    let t = [edge[0] + cell.shift[0], edge[1] + cell.shift[1]];
+                    let base = [floor(t[0]), floor(t[1])];
+                    let phi = [(t[0] - base[0]) * PHI_STEPS as f64, (t[1] - base[1]) * PHI_STEPS as f64];
+                    let node = [
+                        (phi[0] as usize).min(PHI_STEPS - 1),
+                        (phi[1] as usize).min(PHI_STEPS - 1),
+                    ];
+                    let frac = [phi[0] - node[0] as f64, phi[1] - node[1] as f64];
+                    evaluated += 1;
+                    if !table.lookup(cell.p[0] - c[0], node[0], frac[0], slopes, &mut wx, &mut dwx)
+                        || !table.lookup(cell.p[1] - c[1], node[1], frac[1], slopes, &mut wy, &mut dwy)
+                    {
+                        return;
+                    }
+                    let (sx, sy): (f64, f64) = (wx[..taps].iter().sum(), wy[..taps].iter().sum());
+                    power += cell.area * sx * sy;
+                    for b in 0..taps {
+                        for a in 0..taps {
+                            let w = cell.area * wx[a] * wy[b];
+                            for (df, tshift) in dfs.iter_mut().zip(terms) {
+                                *df = cell.area * (dwx[a] * tshift[0] * wy[b] + wx[a] * dwy[b] * tshift[1]);
+                            }
+                            kernel.add(base[0] as i64 + a as i64, base[1] as i64 + b as i64, w, &dfs);
+                        }
+                    }
+                };
+                for (at, (cell, lo, hi, fine)) in cells.coarse.iter().enumerate() {
+                    if cells.near(lo, hi, c, core) {
+                        for f in fine.clone() {
+                            deposit(
+                                &cells.fine[f],
+                                &cells.fine_terms[f * n_terms..(f + 1) * n_terms],
+                                &mut kernel,
+                            );
+                        }
+                    } else {
+                        deposit(cell, &cells.coarse_terms[at * n_terms..(at + 1) * n_terms], &mut kernel);
+                    }
+                }
+            }
+        }
+        ViewKernel {
+            taps: kernel.taps(),
+            traced: evaluated,
+            in_pupil: evaluated,
+            power,
+        }
+    }
+
+    /// The most the landing shift s(P) changes per mm of pupil (retinal pixels), over a 17 × 17 grid of the
+    /// pupil, by differences over 1 % of its radius.
+    fn shift_slope(&self) -> f64 {
+        const N: usize = 17;
+        let eps = 0.01;
+        let k = self.shift_per_grad;
+        let mut slope = 0f64;
+        for j in 0..N {
+            for i in 0..N {
+                let (x, y) = (
+                    2.0 * i as f64 / (N - 1) as f64 - 1.0,
+                    2.0 * j as f64 / (N - 1) as f64 - 1.0,
+                );
+                if x * x + y * y > 1.0 {
+                    continue;
+                }
+                let g = self.poly.gradient(x, y);
+                let gx = self.poly.gradient(x + eps, y);
+                let gy = self.poly.gradient(x, y + eps);
+                for n in 0..2 {
+                    let change = (gx[n] - g[n]).abs() + (gy[n] - g[n]).abs();
+                    slope = slope.max(k * change / (eps * self.r_p));
+                }
+            }
+        }
+        slope
+    }
+
+    /// Every view's kernel by quadrature, normalised as the sampled kernels are (a plain image seen at its own
+    /// intensity from the design position).
+    pub(super) fn quadrature_kernels(&self) -> Vec<ViewKernel> {
+        let d = self.display;
+        let mut g = self.axis_geometry();
+        // Halve the cells until the landing moves by at most MAX_SHIFT_PER_CELL across one.
+        let slope = self.shift_slope();
+        for _ in 0..MAX_HALVINGS {
+            if slope * g.cell <= MAX_SHIFT_PER_CELL {
+                break;
+            }
+            g.cell *= 0.5;
+        }
+        let table = axis_table(g, self.sampler.expect("a wave-optics build"));
+        let h = g.cell;
+        let cells = PupilCells::new(self, h, true);
+        let views: Vec<(u32, u32)> = (0..d.views_v)
+            .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
+            .collect();
+        let mut kernels: Vec<ViewKernel> = views
+            .par_iter()
+            .map(|&(i, j)| self.quadrature_view(i, j, &cells, &table))
+            .collect();
+        let at_design = self.eye.x_mm == 0.0 && self.eye.y_mm == 0.0;
+        let power = if at_design {
+            kernels.iter().map(|k| k.power).sum()
+        } else {
+            let design = Tracer {
+                eye: EyePosition::default(),
+                term_polys: Vec::new(),
+                poly: self.poly.clone(),
+                ..*self
+            };
+            design.quadrature_power(&PupilCells::new(&design, h, false), &table)
+        };
+        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
+        let w = if power > 0.0 { (k2 / power) as f32 } else { 0.0 };
+        for k in &mut kernels {
+            for t in &mut k.taps {
+                t.w *= w;
+                t.dw.iter_mut().for_each(|v| *v *= w);
+            }
+        }
+        kernels
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `secure`'s lenslets at 550 nm and the design distance.
+    fn secure_axis() -> AxisGeometry {
+        let (a, lambda_mm, d, g, p_s) = (1.0, 550e-6, 500.0, 500.0 / (9.0 * 0.6), 1.0 / 9.0);
+        AxisGeometry {
+            a,
+            w: p_s * d / g,
+            b: lambda_mm * d / a,
+            pix: 1.0,
+            cell: lambda_mm * d / a,
+        }
+    }
+
+    /// The tabulated deposits against what they must be whatever the quadrature: the taps of a deposit add up to
+    /// the axis's light through the lenslet, r_A(δ), whose integral over δ is the whole (1, the sinc² table being
+    /// normalised over its reach); hats reproduce linear functions (Σ_i i·hat(x − i) = x), so where r is
+    /// symmetric about the lenslet's centre (δ = 0) the mean landing is the lenslet's centre, φ + A/(2·pix).
+    #[test]
+    fn the_deposits_hold_the_lenslets_light_and_land_it_at_its_centre() {
+        let g = secure_axis();
+        let table = AxisTable::new(g, DiffractionSampler::shared());
+        assert_eq!(table.taps, 3);
+        let step = 1.0 / table.per_mm;
+        let whole: f64 = table.power.iter().sum::<f64>() * step;
+        assert!((whole - 1.0).abs() < 1e-3, "∫ r_A = {whole}");
+        let (mut w, mut dw) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS]);
+        for delta in [-2.3, -0.41, 0.0, 0.17, 1.9] {
+            for p in [0, 7, 16, 31] {
+                assert!(table.lookup(delta, p, 0.0, false, &mut w, &mut dw));
+                let sum: f64 = w[..3].iter().sum();
+                let power = table.power_at(delta);
+                assert!(
+                    (sum - power).abs() <= 1e-5 * power.max(1e-3),
+                    "δ {delta}, φ node {p}: {sum} against {power}"
+                );
+                if delta == 0.0 {
+                    let mean: f64 = w[..3].iter().enumerate().map(|(i, v)| i as f64 * v).sum::<f64>() / sum;
+                    let expected = p as f64 / PHI_STEPS as f64 + 0.5 * g.a / g.pix;
+                    assert!((mean - expected).abs() < 1e-4, "φ node {p}: {mean} against {expected}");
+                }
+            }
+        }
+        // Where the view's light is (its lenslet and screen pixel, |δ| ≤ 0.8 mm) r_A is about 1/(A + w)… and
+        // outside it falls to the tails.
+        assert!(table.power_at(0.0) > 0.5 && table.power_at(3.0) < 0.01 * table.power_at(0.0));
+    }
+
+    /// The cells' shares of the disc add up to its area and their centroids to its centre (0), for a pupil the
+    /// cells do not divide.
+    #[test]
+    fn the_cells_tile_the_pupil() {
+        for (r, h) in [(3.0f64, 0.275f64), (2.37, 0.1)] {
+            let n = (2.0 * r / h).ceil() as i64 + 2;
+            let (mut area, mut moment) = (0.0, [0.0; 2]);
+            for j in -n..n {
+                for i in -n..n {
+                    if let Some((a, p)) = disc_share([i as f64 * h, j as f64 * h], h, r, r * r) {
+                        area += a;
+                        moment[0] += a * p[0];
+                        moment[1] += a * p[1];
+                    }
+                }
+            }
+            let disc = std::f64::consts::PI * r * r;
+            assert!((area - disc).abs() < 2e-3 * disc, "{area} against {disc}");
+            assert!(
+                moment[0].abs() < 1e-9 * disc && moment[1].abs() < 1e-9 * disc,
+                "{moment:?}"
+            );
+        }
+    }
+}
