@@ -330,12 +330,15 @@ struct Cell {
     shift: [f64; 2],
 }
 
+/// A coarse cell: its aggregate, its square's corners (mm) and its fine cells.
+type CoarseCell = (Cell, [f64; 2], [f64; 2], std::ops::Range<usize>);
+
 /// The pupil's cells, fine and coarse (each coarse cell COARSE × COARSE fine ones, its area, centroid and mean
 /// shift), with every cell's landing shift per derivative term.
 struct PupilCells {
     fine: Vec<Cell>,
     fine_terms: Vec<[f64; 2]>,
-    coarse: Vec<(Cell, [f64; 2], [f64; 2], std::ops::Range<usize>)>,
+    coarse: Vec<CoarseCell>,
     coarse_terms: Vec<[f64; 2]>,
     max_shift: f64,
 }
