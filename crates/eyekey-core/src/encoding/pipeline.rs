@@ -16,11 +16,13 @@ use crate::evaluation::attackers::{camera_channels, camera_lens, camera_rgb, hea
 use crate::evaluation::{Reference, DEFAULT_THRESHOLD};
 use crate::physics::accommodation::Accommodation;
 use crate::physics::display::DisplayGeometry;
-use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError};
+use crate::physics::observer::{plain_light_field_for_image, transports, Lens, Observer, ObserverError, Optics};
 use crate::physics::population::sample_population;
 use crate::physics::profile::VisionProfile;
 use crate::physics::spectral::coupling;
-use crate::physics::transport::{EyePosition, RetinalGrid, TransportCache, TransportError, TransportOptions};
+use crate::physics::transport::{
+    deterministic_kernels, EyePosition, RetinalGrid, TransportCache, TransportError, TransportOptions,
+};
 use rayon::prelude::*;
 
 /// The light field and what the solver did.
@@ -768,8 +770,10 @@ struct Cast {
     /// The target again, its kernels drawn with another seed and `GUARD_SUB_RAYS` times the sub-rays: the target
     /// guard's second look, so that a light field that only its own operator's sampling noise makes legible is
     /// not taken as read. With as few sub-rays as the encoder's, it read a view that the evaluation and 6 of 7
-    /// further draws misread (docs/experiments.md §2e).
-    check: Observer,
+    /// further draws misread (docs/experiments.md §2e). None where the target's kernels carry no sampling noise
+    /// (lenslets under wave optics, [`crate::physics::transport::deterministic_kernels`]): another look would be
+    /// the same operator.
+    check: Option<Observer>,
     target_objective: Vec<f32>,
     /// ‖S'_t‖², the scale of the data term.
     energy: f64,
@@ -800,8 +804,8 @@ impl Cast {
     /// The target's view of `l` scored by `reference` through every look the guard judges: its own operator, the
     /// check's, and each focus state's.
     fn target_scores(&self, reference: &Reference, l: &[f32]) -> Vec<crate::evaluation::ViewScore> {
-        [&self.target, &self.check]
-            .into_iter()
+        std::iter::once(&self.target)
+            .chain(&self.check)
             .chain(&self.focused)
             .map(|o| reference.score_observer("target", o, l).0)
             .collect()
@@ -850,7 +854,17 @@ impl Cast {
                 .map_err(|e| observer_error("target profile", e))
         };
         let target = look(&target_opts)?;
-        let check = look(&guard_transport(o))?;
+        // The wave-optics kernels a build at the design distance makes (`transports`): by quadrature or sampled.
+        let kernels = TransportOptions {
+            wave: Some(crate::physics::transport::WaveSampling {
+                wavelength_nm: 550.0,
+                neighbour_blocks: 1,
+                kernel_rays: 1,
+            }),
+            ..base_transport(o)
+        };
+        let sampled = !(o.optics == Optics::Wave && deterministic_kernels(d, &kernels));
+        let check = sampled.then(|| look(&guard_transport(o))).transpose()?;
         progress(0.05);
         let target_objective = target.objective(&spec.document, OBJECTIVE_LEVEL);
         let energy = target_objective.iter().map(|v| (*v as f64).powi(2)).sum();

@@ -39,6 +39,7 @@ pub use grid::{
     EyePosition, RetinalGrid, SubRaySequence, TransportOptions, WaveSampling, DEFAULT_WAVELENGTHS_PER_BAND,
 };
 use kernels::{spmv_band_adjoint, spmv_band_forward, spmv_fused};
+pub use quadrature::deterministic_kernels;
 pub use shift_invariant::{angle_sampling_radius_mm, RAY_BUNDLE_CACHE_BYTES, SAMPLING_PUPIL_STEP_MM};
 pub(crate) use stencil::shared_spectra;
 pub use stencil::{multiply_add_peak_gflops, vector_isa, GatheredField, ProductMethod, StencilOperator};

@@ -464,6 +464,20 @@ fn disc_share(lo: [f64; 2], h: f64, r: f64, r2: f64) -> Option<(f64, [f64; 2])> 
     })
 }
 
+/// Whether a wave-optics build for an eye at the design distance from `display` with `options` makes its kernels
+/// by quadrature, so that they carry no sampling noise and do not depend on the seed: a lenslet display whose
+/// lenslet spans at most six retinal pixels, with the quadrature asked for (the default).
+pub fn deterministic_kernels(
+    display: &crate::physics::display::DisplayGeometry,
+    options: &super::TransportOptions,
+) -> bool {
+    let pixel = super::RetinalGrid::for_display(display, options.retina_oversample).pixel_mm;
+    options.wave.is_some_and(|w| w.kernel_rays > 0)
+        && display.aperture == crate::physics::display::Aperture::Lenslet
+        && options.sequence == super::SubRaySequence::Quadrature
+        && (display.hole_diameter_mm / pixel - 1e-9).ceil() as usize + 2 <= MAX_TAPS
+}
+
 impl Tracer<'_> {
     /// The geometry of one axis of this display's lenslets at this wavelength and distance.
     fn axis_geometry(&self) -> AxisGeometry {
@@ -478,12 +492,9 @@ impl Tracer<'_> {
         }
     }
 
-    /// Whether this build's kernels are made by quadrature: a lenslet display whose lenslet spans at most six
-    /// retinal pixels, with the quadrature asked for.
+    /// Whether this build's kernels are made by quadrature ([`deterministic_kernels`]).
     pub(super) fn uses_quadrature(&self) -> bool {
-        self.display.aperture == crate::physics::display::Aperture::Lenslet
-            && self.options.sequence == super::SubRaySequence::Quadrature
-            && self.axis_geometry().taps() <= MAX_TAPS
+        deterministic_kernels(self.display, self.options)
     }
 
     /// The chief crossing c of view (i, j) from the block `m` over, and the blocks whose light can reach.
