@@ -530,8 +530,8 @@ pub fn kernels_bench(sub_rays: u32) -> Result<String> {
          Kronecker builds of {REFERENCE}× the job's sub-rays under other seeds (each rotation is an independent \
          unbiased estimate; independent draws converge too erratically on `pinhole` to serve); its own error is \
          about half the two halves' difference, shown. The job draws {sub_rays} sub-rays; the target guard's \
-         second look {}×. Lenslet displays' kernels are made by quadrature by default (no sub-rays, \
-         docs/design.md §2.7): its error and build time (tables cached) in the last column.\n\n",
+         second look {}×. On lenslet displays, kernels by quadrature (no sub-rays, docs/design.md §2.7): its \
+         error and build time (tables cached) in the last column.\n\n",
         eyekey_core::physics::transport::DEFAULT_WAVELENGTHS_PER_BAND,
         pipeline::GUARD_SUB_RAYS,
     );
@@ -591,6 +591,139 @@ pub fn kernels_bench(sub_rays: u32) -> Result<String> {
             }
             print!("{row}");
             std::io::stdout().flush()?;
+            out.push_str(&row);
+        }
+    }
+    Ok(out)
+}
+
+/// One person's 4-band kernels (the bench eye at the seat) built by quadrature with its tables cached, against
+/// the sampled kernels with their ray bundles cached (as an evaluation of many people finds both), alternately,
+/// five rounds; the fastest and slowest round of each.
+fn kernel_time_rows(sub_rays: u32) -> Result<String> {
+    let mut out = String::from(
+        "One person's 4-band kernels (the bench eye at the seat, 12 wavelengths), built by quadrature with its \
+         tables cached against the sampled kernels (Kronecker, the job's sub-rays) with their ray bundles cached, \
+         as an evaluation of many people finds both; alternately, five rounds, fastest–slowest:\n\n",
+    );
+    out.push_str(&table_header(&[
+        "display",
+        "quadrature",
+        "sampled",
+        "quadrature / sampled (fastest)",
+    ]));
+    for name in ["secure", "lenslet"] {
+        let display = DisplayGeometry::preset(name)?;
+        let eye = EyePosition::default();
+        let mut times = [Vec::new(), Vec::new()];
+        for round in 0..6 {
+            for (at, sequence) in [SubRaySequence::Quadrature, SubRaySequence::Kronecker]
+                .into_iter()
+                .enumerate()
+            {
+                let (_, secs) = kernel_image(&display, eye, sub_rays, 1, sequence)?;
+                // The first round fills the caches.
+                if round > 0 {
+                    times[at].push(secs);
+                }
+            }
+        }
+        let span = |t: &[f64]| {
+            let (lo, hi) = t
+                .iter()
+                .fold((f64::INFINITY, 0f64), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
+            (lo, hi)
+        };
+        let ((ql, qh), (sl, sh)) = (span(&times[0]), span(&times[1]));
+        let row = format!(
+            "| {name} | {:.1}–{:.1} ms | {:.1}–{:.1} ms | {:.2}× |\n",
+            ql * 1e3,
+            qh * 1e3,
+            sl * 1e3,
+            sh * 1e3,
+            ql / sl
+        );
+        print!("{row}");
+        out.push_str(&row);
+    }
+    Ok(out)
+}
+
+/// The target's view of its own frames (the `secure` and `lenslet` jobs' defaults, a PIN slip, a held-out
+/// target) through the kernels a job builds, against converged kernels: the mean of two Kronecker builds of 32×
+/// the job's sub-rays under other seeds, relative to that view's contrast, at the seat and 2 mm aside. Encoded
+/// frames are where the kernels' error matters: they are tuned so that views cancel, and a view's contrast is a
+/// small part of the light.
+fn encoded_view_bench(sub_rays: u32) -> Result<String> {
+    let mut out = String::from(
+        "The target's view of its own frames (each display's job with its default options, a PIN slip, a held-out \
+         target), through the kernels a job builds, against converged kernels (the mean of two Kronecker builds of \
+         32× the job's sub-rays under other seeds; its own error is half their difference), relative to the view's \
+         contrast; the sampled kernels as the RMS over 4 seeds:\n\n",
+    );
+    out.push_str(&table_header(&[
+        "display, eye",
+        "reference's own error",
+        "quadrature",
+        "Kronecker, the job's sub-rays (the default)",
+    ]));
+    for name in ["secure", "lenslet"] {
+        let display = DisplayGeometry::preset(name)?;
+        let (document, text) = super::experiment::pin_slip_of(display.holes_x * 4, display.holes_y * 4, "4821");
+        let target = eyekey_core::physics::population::sample_population(1, 4242, Default::default()).remove(0);
+        let spec = JobSpec {
+            display: display.clone(),
+            target: target.clone(),
+            target_label: "bench".into(),
+            observers: vec![],
+            document,
+            decoy: None,
+            options: EncodeOptions {
+                document_text: Some(text),
+                seed: Some(crate::research::EXPERIMENT_SEED),
+                ..Default::default()
+            },
+        };
+        let cache = TransportCache::disabled();
+        let encoded = pipeline::encode(&spec, &cache, &|_| {}, &AtomicBool::new(false))?;
+        let l = &encoded.light_field;
+        for x_mm in [0.0, 2.0] {
+            let eye = EyePosition {
+                x_mm,
+                ..Default::default()
+            };
+            let view = |sequence: SubRaySequence, rays: u32, seed: u64| -> Result<Vec<f64>> {
+                let opts = TransportOptions {
+                    sub_rays: rays,
+                    seed,
+                    sequence,
+                    ..Default::default()
+                };
+                let o = Observer::new(&display, &target, eye, &opts, Optics::Wave, &cache)?;
+                let mut y = vec![0f32; o.n_pixels() * 3];
+                o.forward_lms(l, &mut y);
+                Ok(y.into_iter().map(f64::from).collect())
+            };
+            let a = view(SubRaySequence::Kronecker, 32 * sub_rays, 1001)?;
+            let b = view(SubRaySequence::Kronecker, 32 * sub_rays, 1002)?;
+            let reference: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 0.5 * (x + y)).collect();
+            let rel = |v: &[f64]| {
+                let mean = reference.iter().sum::<f64>() / reference.len() as f64;
+                let e: f64 = v.iter().zip(&reference).map(|(x, y)| (x - y).powi(2)).sum();
+                let n: f64 = reference.iter().map(|y| (y - mean).powi(2)).sum();
+                100.0 * (e / n).sqrt()
+            };
+            // a is half the two builds' difference from their mean.
+            let own = rel(&a);
+            let quadrature = rel(&view(SubRaySequence::Quadrature, sub_rays, 1)?);
+            let sampled: f64 = (1..=4)
+                .map(|seed| view(SubRaySequence::Kronecker, sub_rays, seed).map(|v| rel(&v).powi(2)))
+                .sum::<Result<f64>>()?;
+            let row = format!(
+                "| {name}, {x_mm} mm aside | {own:.3} % | {quadrature:.3} % | {:.3} % |\n",
+                (sampled / 4.0).sqrt()
+            );
+            print!("{row}");
             out.push_str(&row);
         }
     }
@@ -1023,11 +1156,13 @@ impl BenchRun<'_> {
     /// The `kernels` section: the kernels' sampling noise on four presets (the preset flag does not apply).
     fn kernels(&self) -> Result<String> {
         Ok(format!(
-            "Measured {} by `eyekey bench --sub-rays {} --section kernels` ({}):\n\n{}",
+            "Measured {} by `eyekey bench --sub-rays {} --section kernels` ({}):\n\n{}\n{}\n{}",
             self.stamp,
             self.args.sub_rays,
             build_kind(),
-            kernels_bench(self.args.sub_rays)?
+            kernels_bench(self.args.sub_rays)?,
+            encoded_view_bench(self.args.sub_rays)?,
+            kernel_time_rows(self.args.sub_rays)?
         ))
     }
 

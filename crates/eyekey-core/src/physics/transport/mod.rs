@@ -970,7 +970,7 @@ mod tests {
         // are piecewise linear in W, so the difference is exact except for sub-rays crossing a pixel edge
         // within ±h (a fraction ~4·h·|∂f/∂W| ≈ 0.3 % of them at h = 1e-4 µm) and f32 rounding
         // (~3e-4 relative): relative error 2 % on the whole image.
-        check_derivative(tiny(), None);
+        check_derivative(tiny(), None, SubRaySequence::Kronecker);
     }
 
     #[test]
@@ -985,6 +985,7 @@ mod tests {
                 neighbour_blocks: 1,
                 kernel_rays: 0,
             }),
+            SubRaySequence::Kronecker,
         );
     }
 
@@ -998,12 +999,13 @@ mod tests {
                 neighbour_blocks: 1,
                 kernel_rays: 512,
             }),
+            SubRaySequence::Kronecker,
         );
     }
 
     #[test]
     fn with_quadrature_kernels_the_derivative_matches_finite_differences() {
-        // Lenslet kernels by quadrature (the default): every deposit is bilinear in the table, so T is piecewise
+        // Lenslet kernels by quadrature: every deposit is bilinear in the table, so T is piecewise
         // linear in W, and ∂T/∂W is the derivative of that interpolation: the same 2 %.
         check_derivative(
             tiny_lenslet(),
@@ -1012,6 +1014,7 @@ mod tests {
                 neighbour_blocks: 1,
                 kernel_rays: 512,
             }),
+            SubRaySequence::Quadrature,
         );
     }
 
@@ -1048,6 +1051,7 @@ mod tests {
         }
         let opts = TransportOptions {
             wave: wave(640.0, 1).wave.map(|w| WaveSampling { kernel_rays: 682, ..w }),
+            sequence: SubRaySequence::Quadrature,
             ..wave(640.0, 1)
         };
         let t = TransportMatrix::build(&d, &aberrated(6.0), two_mm_aside(), &opts).unwrap();
@@ -1159,12 +1163,13 @@ mod tests {
         }
     }
 
-    fn check_derivative(d: DisplayGeometry, wave: Option<WaveSampling>) {
+    fn check_derivative(d: DisplayGeometry, wave: Option<WaveSampling>, sequence: SubRaySequence) {
         let base = aberrated(6.0);
         let terms = vec![4, 5, 7, 12];
         let opts = TransportOptions {
             derivative_terms: terms.clone(),
             wave,
+            sequence,
             ..Default::default()
         };
         let t = TransportMatrix::build(&d, &base, EyePosition::default(), &opts).unwrap();
@@ -1178,6 +1183,7 @@ mod tests {
             minus.coefficients_um[j] -= h;
             let plain = TransportOptions {
                 wave,
+                sequence,
                 ..Default::default()
             };
             let tp = TransportMatrix::build(&d, &plus, EyePosition::default(), &plain).unwrap();

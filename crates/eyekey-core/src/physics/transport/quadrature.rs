@@ -258,7 +258,7 @@ impl AxisTable {
     /// with `slopes`, their derivative in φ into `dw`: that of the bilinear interpolation, so that ∂T/∂W is the
     /// exact derivative of the operator as built.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn lookup(
         &self,
         delta: f64,
@@ -274,9 +274,12 @@ impl AxisTable {
         let taps = self.taps;
         let stride = (PHI_STEPS + 1) * taps;
         let (lo, hi) = (k * stride + p * taps, (k + 1) * stride + p * taps);
-        for i in 0..taps {
-            let at = |o: usize| (1.0 - t) * self.w[lo + o + i] as f64 + t * self.w[hi + o + i] as f64;
-            let (a, b) = (at(0), at(taps));
+        // φ nodes p and p + 1 at δ nodes k and k + 1.
+        let (near, far) = (&self.w[lo..lo + 2 * taps], &self.w[hi..hi + 2 * taps]);
+        let (u, v) = (1.0 - t, t);
+        for i in 0..taps.min(MAX_TAPS) {
+            let a = u * near[i] as f64 + v * far[i] as f64;
+            let b = u * near[taps + i] as f64 + v * far[taps + i] as f64;
             w[i] = a + s * (b - a);
             if slopes {
                 dw[i] = (b - a) * PHI_STEPS as f64;
@@ -346,10 +349,10 @@ struct PupilCells {
 impl PupilCells {
     /// Cells of side `h` over a pupil of radius `tracer.r_p`, each with its share of the disc (8 × 8 points where
     /// the edge crosses it), ordered coarse cell by coarse cell.
-    fn new(tracer: &Tracer<'_>, h: f64, with_shift: bool) -> Self {
+    fn new(tracer: &Tracer<'_>, h: f64, coarse_per: usize, with_shift: bool) -> Self {
         let r_p = tracer.r_p;
-        let n_coarse = ((2.0 * r_p / h).ceil() as usize).div_ceil(COARSE);
-        let origin = -0.5 * (n_coarse * COARSE) as f64 * h;
+        let n_coarse = ((2.0 * r_p / h).ceil() as usize).div_ceil(coarse_per);
+        let origin = -0.5 * (n_coarse * coarse_per) as f64 * h;
         let n_terms = tracer.term_polys.len();
         let k = tracer.shift_per_grad;
         let (mut fine, mut fine_terms, mut coarse, mut coarse_terms) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -360,11 +363,11 @@ impl PupilCells {
                 let start = fine.len();
                 let (mut area, mut moment, mut shift) = (0.0, [0.0; 2], [0.0; 2]);
                 let mut terms = vec![[0.0; 2]; n_terms];
-                for fy in 0..COARSE {
-                    for fx in 0..COARSE {
+                for fy in 0..coarse_per {
+                    for fx in 0..coarse_per {
                         let lo = [
-                            origin + (cx * COARSE + fx) as f64 * h,
-                            origin + (cy * COARSE + fy) as f64 * h,
+                            origin + (cx * coarse_per + fx) as f64 * h,
+                            origin + (cy * coarse_per + fy) as f64 * h,
                         ];
                         let Some((a, p)) = disc_share(lo, h, r_p, r2) else {
                             continue;
@@ -398,8 +401,11 @@ impl PupilCells {
                     }
                 }
                 if area > 0.0 {
-                    let lo = [origin + (cx * COARSE) as f64 * h, origin + (cy * COARSE) as f64 * h];
-                    let hi = [lo[0] + COARSE as f64 * h, lo[1] + COARSE as f64 * h];
+                    let lo = [
+                        origin + (cx * coarse_per) as f64 * h,
+                        origin + (cy * coarse_per) as f64 * h,
+                    ];
+                    let hi = [lo[0] + coarse_per as f64 * h, lo[1] + coarse_per as f64 * h];
                     let cell = Cell {
                         area,
                         p: [moment[0] / area, moment[1] / area],
@@ -603,6 +609,10 @@ impl Tracer<'_> {
                     }
                     let (sx, sy): (f64, f64) = (wx[..taps].iter().sum(), wy[..taps].iter().sum());
                     power += cell.area * sx * sy;
+                    if !slopes {
+                        kernel.add_outer(base[0] as i64, base[1] as i64, &wx[..taps], &wy[..taps], cell.area);
+                        return;
+                    }
                     for b in 0..taps {
                         for a in 0..taps {
                             let w = cell.area * wx[a] * wy[b];
@@ -671,6 +681,7 @@ impl Tracer<'_> {
         let mut g = self.axis_geometry();
         // Halve the cells until the landing moves by at most MAX_SHIFT_PER_CELL across one.
         let slope = self.shift_slope();
+        let coarse_per = COARSE;
         for _ in 0..MAX_HALVINGS {
             if slope * g.cell <= MAX_SHIFT_PER_CELL {
                 break;
@@ -679,7 +690,7 @@ impl Tracer<'_> {
         }
         let table = axis_table(g, self.sampler.expect("a wave-optics build"));
         let h = g.cell;
-        let cells = PupilCells::new(self, h, true);
+        let cells = PupilCells::new(self, h, coarse_per, true);
         let views: Vec<(u32, u32)> = (0..d.views_v)
             .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
             .collect();
@@ -697,7 +708,7 @@ impl Tracer<'_> {
                 poly: self.poly.clone(),
                 ..*self
             };
-            design.quadrature_power(&PupilCells::new(&design, h, false), &table)
+            design.quadrature_power(&PupilCells::new(&design, h, coarse_per, false), &table)
         };
         let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
         let w = if power > 0.0 { (k2 / power) as f32 } else { 0.0 };

@@ -287,6 +287,29 @@ impl KernelBox {
         }
     }
 
+    /// Adds the outer product `scale`·wx ⊗ wy with its first tap at (x, y), without derivative terms: row by row
+    /// where the block lies inside the box, else tap by tap ([`Self::add`]).
+    #[inline]
+    pub(super) fn add_outer(&mut self, x: i64, y: i64, wx: &[f64], wy: &[f64], scale: f64) {
+        let (cx, cy) = (x - self.x0, y - self.y0);
+        let (nx, ny) = (wx.len() as i64, wy.len() as i64);
+        if cx >= 0 && cy >= 0 && cx + nx <= self.width && cy + ny <= self.height && self.n_terms == 0 {
+            for (b, wyb) in wy.iter().enumerate() {
+                let row = ((cy + b as i64) * self.width + cx) as usize;
+                let s = scale * wyb;
+                for (acc, wxa) in self.w[row..row + wx.len()].iter_mut().zip(wx) {
+                    *acc += s * wxa;
+                }
+            }
+            return;
+        }
+        for (b, wyb) in wy.iter().enumerate() {
+            for (a, wxa) in wx.iter().enumerate() {
+                self.add(x + a as i64, y + b as i64, scale * wxa * wyb, &[]);
+            }
+        }
+    }
+
     /// The non-zero taps, sorted by (dy, dx).
     pub(super) fn taps(self) -> Vec<Tap> {
         let n_terms = self.n_terms;
