@@ -15,6 +15,7 @@
 //! Light-field layout everywhere: band-interleaved, `l[p * n_bands + n]` for sample p (frame order, see
 //! [`DisplayGeometry::sample_index`]) and band n. Retinal images: `y[r * 3 + a]`, a = L, M, S.
 
+mod byte_cache;
 mod cache;
 mod csr;
 mod fft;

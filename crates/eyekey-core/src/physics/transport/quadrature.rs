@@ -22,11 +22,11 @@
 //! screen pixel and three diffraction orders), where only the smooth tails of r reach, cells of four by four are
 //! taken as one.
 
-use std::collections::{HashMap, VecDeque};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 
 use rayon::prelude::*;
 
+use super::byte_cache::ByteBoundedCache;
 use super::shift_invariant::{KernelBox, ViewKernel};
 use super::trace::{floor, Tracer};
 use crate::physics::diffraction::DiffractionSampler;
@@ -292,40 +292,16 @@ impl AxisTable {
 /// The most taps a deposit may have (a lenslet wider than six retinal pixels is refused by the caller).
 pub(super) const MAX_TAPS: usize = 8;
 
-#[derive(Default)]
-struct TableCache {
-    map: HashMap<String, Arc<AxisTable>>,
-    order: VecDeque<String>,
-    bytes: usize,
-}
-
 /// The process's table for `g` (tabulated on first use, shared by every person and band at that wavelength).
 pub(super) fn axis_table(g: AxisGeometry, sampler: &DiffractionSampler) -> Arc<AxisTable> {
-    static CACHE: OnceLock<Mutex<TableCache>> = OnceLock::new();
-    let cache = CACHE.get_or_init(Default::default);
-    let key = format!("{:?}", g);
-    if let Some(t) = cache.lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
-        return t.clone();
-    }
-    let table = Arc::new(AxisTable::new(g, sampler));
-    let mut c = cache.lock().unwrap_or_else(|e| e.into_inner());
-    if !c.map.contains_key(&key) && table.bytes() <= TABLE_CACHE_BYTES {
-        c.bytes += table.bytes();
-        c.map.insert(key.clone(), table.clone());
-        c.order.push_back(key);
-        while c.bytes > TABLE_CACHE_BYTES {
-            let Some(old) = c.order.pop_front() else { break };
-            if let Some(t) = c.map.remove(&old) {
-                c.bytes -= t.bytes();
-            }
-        }
-    }
-    table
+    static CACHE: OnceLock<ByteBoundedCache<AxisTable>> = OnceLock::new();
+    CACHE
+        .get_or_init(|| ByteBoundedCache::new(TABLE_CACHE_BYTES))
+        .get_or_make(format!("{g:?}"), || AxisTable::new(g, sampler), AxisTable::bytes)
 }
 
 /// One cell of the pupil: its area inside the pupil (mm²), that area's centroid (mm) and the landing shift there
-/// (retinal pixels), with the φ node and base pixel the shift gives a deposit's first tap before the block's
-/// offset.
+/// (retinal pixels).
 #[derive(Clone, Copy, Default)]
 struct Cell {
     area: f64,

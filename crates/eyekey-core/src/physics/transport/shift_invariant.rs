@@ -16,6 +16,7 @@
 
 use rayon::prelude::*;
 
+use super::byte_cache::ByteBoundedCache;
 use super::rng::{SubRayDraws, RAY_BATCH, SUB_RAY_DIMS};
 use super::stencil::{StencilOperator, ViewStencil};
 use super::trace::{bilinear, floor, sin_cos_turns, Tracer};
@@ -398,16 +399,9 @@ pub fn angle_sampling_radius_mm(display: &DisplayGeometry, wavelength_nm: f64, d
     }
 }
 
-#[derive(Default)]
-struct BundleCache {
-    map: std::collections::HashMap<String, std::sync::Arc<RayBundle>>,
-    order: std::collections::VecDeque<String>,
-    bytes: usize,
-}
-
-fn bundle_cache() -> &'static std::sync::Mutex<BundleCache> {
-    static CACHE: std::sync::OnceLock<std::sync::Mutex<BundleCache>> = std::sync::OnceLock::new();
-    CACHE.get_or_init(Default::default)
+fn bundle_cache() -> &'static ByteBoundedCache<RayBundle> {
+    static CACHE: std::sync::OnceLock<ByteBoundedCache<RayBundle>> = std::sync::OnceLock::new();
+    CACHE.get_or_init(|| ByteBoundedCache::new(RAY_BUNDLE_CACHE_BYTES))
 }
 
 impl Tracer<'_> {
@@ -504,35 +498,25 @@ impl Tracer<'_> {
             nb,
             self.options.sequence,
         );
-        if let Some(b) = bundle_cache().lock().unwrap_or_else(|e| e.into_inner()).map.get(&key) {
-            return b.clone();
-        }
-        let views: Vec<(u32, u32)> = (0..d.views_v)
-            .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
-            .collect();
-        let traced: Vec<(Vec<AimedRay>, u64)> = views
-            .par_iter()
-            .map(|&(i, j)| self.aimed_rays(i, j, rays, r_s, nb as i64))
-            .collect();
-        let (views, traced) = traced.into_iter().unzip();
-        let bundle = std::sync::Arc::new(RayBundle {
-            views,
-            traced,
-            nb: nb as i64,
-        });
-        let mut cache = bundle_cache().lock().unwrap_or_else(|e| e.into_inner());
-        if !cache.map.contains_key(&key) && bundle.bytes() <= RAY_BUNDLE_CACHE_BYTES {
-            cache.bytes += bundle.bytes();
-            cache.map.insert(key.clone(), bundle.clone());
-            cache.order.push_back(key);
-            while cache.bytes > RAY_BUNDLE_CACHE_BYTES {
-                let Some(old) = cache.order.pop_front() else { break };
-                if let Some(b) = cache.map.remove(&old) {
-                    cache.bytes -= b.bytes();
+        bundle_cache().get_or_make(
+            key,
+            || {
+                let views: Vec<(u32, u32)> = (0..d.views_v)
+                    .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
+                    .collect();
+                let traced: Vec<(Vec<AimedRay>, u64)> = views
+                    .par_iter()
+                    .map(|&(i, j)| self.aimed_rays(i, j, rays, r_s, nb as i64))
+                    .collect();
+                let (views, traced) = traced.into_iter().unzip();
+                RayBundle {
+                    views,
+                    traced,
+                    nb: nb as i64,
                 }
-            }
-        }
-        bundle
+            },
+            RayBundle::bytes,
+        )
     }
 
     /// View (i, j)'s sub-rays, `rays` per block for the blocks whose light can reach the pupil (fewer for the
