@@ -30,7 +30,6 @@ use super::byte_cache::ByteBoundedCache;
 use super::shift_invariant::{KernelBox, ViewKernel};
 use super::trace::{floor, Tracer};
 use crate::physics::diffraction::DiffractionSampler;
-use crate::physics::transport::EyePosition;
 
 /// Table nodes per retinal pixel of the landing's fraction φ.
 const PHI_STEPS: usize = 32;
@@ -678,22 +677,10 @@ impl Tracer<'_> {
         let power = if at_design {
             kernels.iter().map(|k| k.power).sum()
         } else {
-            let design = Tracer {
-                eye: EyePosition::default(),
-                term_polys: Vec::new(),
-                poly: self.poly.clone(),
-                ..*self
-            };
+            let design = self.at_design_position();
             design.quadrature_power(&PupilCells::new(&design, h, coarse_per, false), &table)
         };
-        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
-        let w = if power > 0.0 { (k2 / power) as f32 } else { 0.0 };
-        for k in &mut kernels {
-            for t in &mut k.taps {
-                t.w *= w;
-                t.dw.iter_mut().for_each(|v| *v *= w);
-            }
-        }
+        self.normalise(&mut kernels, power);
         kernels
     }
 }

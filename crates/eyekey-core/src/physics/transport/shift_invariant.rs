@@ -810,6 +810,30 @@ impl Tracer<'_> {
         angle_sampling_radius_mm(self.display, lambda_nm, self.d_eye) <= self.r_p
     }
 
+    /// This eye's tracer at the design position, without derivative terms: the kernels' brightness is counted
+    /// there.
+    pub(super) fn at_design_position(&self) -> Self {
+        Tracer {
+            eye: EyePosition::default(),
+            term_polys: Vec::new(),
+            poly: self.poly.clone(),
+            ..*self
+        }
+    }
+
+    /// Scales every kernel so that `power` (the light a plain image sends into the pupil from the design
+    /// position) is seen as k² per pixel: the eye adapted to the display (docs/design.md §2.7).
+    pub(super) fn normalise(&self, kernels: &mut [ViewKernel], power: f64) {
+        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
+        let w = if power > 0.0 { (k2 / power) as f32 } else { 0.0 };
+        for k in kernels {
+            for t in &mut k.taps {
+                t.w *= w;
+                t.dw.iter_mut().for_each(|v| *v *= w);
+            }
+        }
+    }
+
     /// Every view's kernel, each landing weighted so that a plain image is seen at its own intensity from
     /// the design position (the eye adapted to the display; docs/design.md §2.7).
     fn view_kernels(&self, rays: u32) -> Vec<ViewKernel> {
@@ -825,12 +849,7 @@ impl Tracer<'_> {
         let design_power: f64 = if at_design {
             0.0
         } else {
-            let design = Tracer {
-                eye: EyePosition::default(),
-                term_polys: Vec::new(),
-                poly: self.poly.clone(),
-                ..*self
-            };
+            let design = self.at_design_position();
             let bundle = design.samples_angle().then(|| design.ray_bundle(rays));
             views
                 .par_iter()
@@ -841,8 +860,6 @@ impl Tracer<'_> {
                 })
                 .sum()
         };
-        let k2 = (self.options.retina_oversample * self.options.retina_oversample) as f64;
-        let weight_for = |power: f64| if power > 0.0 { k2 / power } else { 0.0 };
         let bundle = self.samples_angle().then(|| self.ray_bundle(rays));
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
@@ -853,13 +870,7 @@ impl Tracer<'_> {
         } else {
             design_power
         };
-        let w = weight_for(power) as f32;
-        for k in &mut kernels {
-            for t in &mut k.taps {
-                t.w *= w;
-                t.dw.iter_mut().for_each(|v| *v *= w);
-            }
-        }
+        self.normalise(&mut kernels, power);
         kernels
     }
 }
