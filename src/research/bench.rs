@@ -148,10 +148,16 @@ fn time_best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
 
 /// The benchmark's eye: a perfect eye with some defocus, coma and spherical aberration.
 fn bench_wavefront() -> Result<eyekey_core::physics::zernike::ZernikeCoefficients> {
+    accommodated_bench_wavefront(0.0)
+}
+
+/// The bench eye accommodated by `dioptres` (+ nearer), as an evaluation sweeps a person's focus.
+fn accommodated_bench_wavefront(dioptres: f64) -> Result<eyekey_core::physics::zernike::ZernikeCoefficients> {
     let mut p = VisionProfile::perfect();
     p.zernike_um[4] = 0.3;
     p.zernike_um[7] = 0.15;
     p.zernike_um[12] = 0.1;
+    let p = eyekey_core::physics::accommodation::Accommodation::accommodated(&p, dioptres);
     Ok(p.effective_wavefront()?)
 }
 
@@ -485,13 +491,13 @@ pub fn wave_bench(sub_rays: u32) -> Result<String> {
 /// applied to a fixed light field: the retinal image, and the seconds the build took.
 fn kernel_image(
     display: &DisplayGeometry,
-    eye: EyePosition,
+    (eye, dioptres): (EyePosition, f64),
     sub_rays: u32,
     seed: u64,
     sequence: SubRaySequence,
 ) -> Result<(Vec<f64>, f64)> {
     use eyekey_core::physics::observer::{transports, Lens};
-    let w = bench_wavefront()?;
+    let w = accommodated_bench_wavefront(dioptres)?;
     let opts = TransportOptions {
         sub_rays,
         seed,
@@ -552,17 +558,25 @@ pub fn kernels_bench(sub_rays: u32) -> Result<String> {
     };
     for name in ["paper", "secure", "lenslet", "pinhole"] {
         let display = DisplayGeometry::preset(name)?;
-        for x_mm in [0.0, 2.0] {
-            let eye = EyePosition {
-                x_mm,
-                ..Default::default()
-            };
+        for (x_mm, dioptres) in [(0.0, 0.0), (2.0, 0.0), (0.0, 2.0)] {
+            let eye = (
+                EyePosition {
+                    x_mm,
+                    ..Default::default()
+                },
+                dioptres,
+            );
             let big = REFERENCE * sub_rays;
             let (a, _) = kernel_image(&display, eye, big, 1001, SubRaySequence::Kronecker)?;
             let (b, _) = kernel_image(&display, eye, big, 1002, SubRaySequence::Kronecker)?;
             let reference: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 0.5 * (x + y)).collect();
             let own = 0.5 * rel(&a, &b).sqrt();
-            let mut row = format!("| {name}, {x_mm} mm aside | {:.3} % |", 100.0 * own);
+            let focus = if dioptres == 0.0 {
+                String::new()
+            } else {
+                format!(", accommodated {dioptres:+} D")
+            };
+            let mut row = format!("| {name}, {x_mm} mm aside{focus} | {:.3} % |", 100.0 * own);
             let mut build = 0.0;
             for m in multiples {
                 let mut cells = Vec::new();
@@ -602,7 +616,8 @@ pub fn kernels_bench(sub_rays: u32) -> Result<String> {
 /// five rounds; the fastest and slowest round of each.
 fn kernel_time_rows(sub_rays: u32) -> Result<String> {
     let mut out = String::from(
-        "One person's 4-band kernels (the bench eye at the seat, 12 wavelengths), built by quadrature with its \
+        "One person's 4-band kernels (the bench eye at the seat, 12 wavelengths, at its own focus and accommodated \
+         by 2 D as an evaluation's focus sweep reaches), built by quadrature with its \
          tables cached against the sampled kernels (Kronecker, the job's sub-rays) with their ray bundles cached, \
          as an evaluation of many people finds both; alternately, five rounds, fastest–slowest:\n\n",
     );
@@ -612,9 +627,9 @@ fn kernel_time_rows(sub_rays: u32) -> Result<String> {
         "sampled",
         "quadrature / sampled (fastest)",
     ]));
-    for name in ["secure", "lenslet"] {
+    for (name, dioptres) in [("secure", 0.0), ("secure", 2.0), ("lenslet", 0.0), ("lenslet", 2.0)] {
         let display = DisplayGeometry::preset(name)?;
-        let eye = EyePosition::default();
+        let eye = (EyePosition::default(), dioptres);
         let mut times = [Vec::new(), Vec::new()];
         for round in 0..6 {
             for (at, sequence) in [SubRaySequence::Quadrature, SubRaySequence::Kronecker]
@@ -636,7 +651,7 @@ fn kernel_time_rows(sub_rays: u32) -> Result<String> {
         };
         let ((ql, qh), (sl, sh)) = (span(&times[0]), span(&times[1]));
         let row = format!(
-            "| {name} | {:.1}–{:.1} ms | {:.1}–{:.1} ms | {:.2}× |\n",
+            "| {name}, accommodated {dioptres:+} D | {:.1}–{:.1} ms | {:.1}–{:.1} ms | {:.2}× |\n",
             ql * 1e3,
             qh * 1e3,
             sl * 1e3,

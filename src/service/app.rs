@@ -173,7 +173,11 @@ impl Application {
             listener,
             router,
             tls,
-            state.config.limits.header_read_timeout,
+            super::listener::ConnectionLimits {
+                header_timeout: state.config.limits.header_read_timeout,
+                idle_timeout: state.config.limits.idle_timeout,
+                max_connections: state.config.limits.max_connections,
+            },
             state.shutdown.clone(),
             state.config.queue.shutdown_grace,
         )

@@ -27,6 +27,12 @@ pub struct ServeArgs {
     /// Time a client has to send a request's headers (and to finish a TLS handshake), seconds.
     #[arg(long, env = "EYEKEY_HEADER_TIMEOUT_SECS", default_value_t = 10)]
     pub header_timeout_secs: u64,
+    /// Time a kept-alive connection may sit idle between requests before it is closed, seconds.
+    #[arg(long, env = "EYEKEY_IDLE_TIMEOUT_SECS", default_value_t = 60)]
+    pub idle_timeout_secs: u64,
+    /// Connections open at once; beyond it new connections are closed as soon as they are accepted.
+    #[arg(long, env = "EYEKEY_MAX_CONNECTIONS", default_value_t = 512)]
+    pub max_connections: usize,
     /// Directory holding the database, uploaded documents, job outputs and generated secrets.
     #[arg(long, env = "EYEKEY_DATA_DIR", default_value = "./eyekey-data")]
     pub data_dir: PathBuf,
@@ -174,8 +180,12 @@ pub struct Limits {
     pub max_body_bytes: usize,
     /// Time until a response starts.
     pub request_timeout: Duration,
-    /// Time a client has to send its request headers (and finish a TLS handshake).
+    /// Time a client has from connecting to sending its request headers (a TLS handshake included).
     pub header_read_timeout: Duration,
+    /// Time a connection may sit idle between requests.
+    pub idle_timeout: Duration,
+    /// Connections open at once.
+    pub max_connections: usize,
 }
 
 /// Durable-queue behaviour.
@@ -199,6 +209,8 @@ impl Default for Limits {
             max_body_bytes: 1024 * 1024,
             request_timeout: Duration::from_secs(30),
             header_read_timeout: Duration::from_secs(10),
+            idle_timeout: Duration::from_secs(60),
+            max_connections: 512,
         }
     }
 }
@@ -266,6 +278,8 @@ impl From<ServeArgs> for Config {
                 max_body_bytes: a.max_body_bytes,
                 request_timeout: Duration::from_secs(a.request_timeout_secs.max(1)),
                 header_read_timeout: Duration::from_secs(a.header_timeout_secs.max(1)),
+                idle_timeout: Duration::from_secs(a.idle_timeout_secs.max(1)),
+                max_connections: a.max_connections.max(1),
             },
             queue: QueueConfig {
                 lease: Duration::from_secs(a.lease_secs.max(1)),

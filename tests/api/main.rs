@@ -9,6 +9,7 @@ mod helpers;
 
 mod admission;
 mod authorization;
+mod connections;
 mod console;
 mod display_client;
 mod displays;

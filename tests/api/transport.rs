@@ -19,7 +19,7 @@ async fn refusal(config: eyekey::service::Config) -> String {
 
 /// A CA and a certificate for localhost and 127.0.0.1 signed by it, written as PEM files into `dir`:
 /// (CA certificate, server certificate, server key).
-fn certificates(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+pub(crate) fn certificates(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let mut ca_params = rcgen::CertificateParams::new(Vec::<String>::new()).unwrap();
     ca_params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
     ca_params

@@ -1067,6 +1067,39 @@ mod tests {
     }
 
     #[test]
+    fn quadrature_kernels_follow_a_landing_that_moves_fast_across_the_pupil() {
+        // The aberrated 6 mm eye refocused by 2 D (c₂⁰ 0.4 + 2.6 µm), with astigmatism at 45° and 0°: the landing
+        // moves up to 6 retinal pixels per mm of pupil along the axes (4 px across a cell of b on tiny_lenslet) and
+        // 1.3 across them. The quadrature follows the first with points across each cell and the second by halving
+        // the cells. Against the mean of two 65,536-sub-ray Kronecker builds, relative to the reference's contrast.
+        // Measured: quadrature 0.037 % and 0.045 %, sampled at 682 sub-rays 0.74 % and 0.89 %. (Pure defocus of
+        // 3 µm, where the cells stay at b with 8 points each: 0.058 % and 0.078 %.)
+        let d = tiny_lenslet();
+        let contrast_rms = |a: &[f64], r: &[f64]| {
+            let mean = r.iter().sum::<f64>() / r.len() as f64;
+            let e: f64 = a.iter().zip(r).map(|(x, y)| (x - y).powi(2)).sum();
+            let n: f64 = r.iter().map(|y| (y - mean).powi(2)).sum();
+            (e / n).sqrt()
+        };
+        let mut c = vec![0.0; 28];
+        (c[3], c[4], c[5], c[6], c[7], c[8], c[12]) = (0.3, 3.0, -0.2, 0.08, 0.15, -0.1, 0.12);
+        let w = ZernikeCoefficients::new(6.0, c).unwrap();
+        for eye in [EyePosition::default(), two_mm_aside()] {
+            let a = kernel_view_of(&d, &w, eye, 65_536, 98, SubRaySequence::Kronecker);
+            let b = kernel_view_of(&d, &w, eye, 65_536, 99, SubRaySequence::Kronecker);
+            let reference: Vec<f64> = a.iter().zip(&b).map(|(x, y)| 0.5 * (x + y)).collect();
+            let quadrature = kernel_view_of(&d, &w, eye, 682, 1, SubRaySequence::Quadrature);
+            let sampled = kernel_view_of(&d, &w, eye, 682, 1, SubRaySequence::Kronecker);
+            let (q, m) = (
+                contrast_rms(&quadrature, &reference),
+                contrast_rms(&sampled, &reference),
+            );
+            assert!(q < 1e-3, "{eye:?}: quadrature {q}");
+            assert!(m > 4.0 * q, "{eye:?}: sampled {m} against quadrature {q}");
+        }
+    }
+
+    #[test]
     fn the_shift_invariant_kernels_agree_with_the_per_sample_trace() {
         // Two independent Monte-Carlo estimates of the same operator: the per-sample trace (every sample its
         // own 256 sub-rays through 3×3 blocks) and one kernel per view (8192 sub-rays per view and block),
@@ -1111,13 +1144,25 @@ mod tests {
     /// The interior of the retinal image of `d` through kernels of `rays` sub-rays drawn from `sequence` with
     /// `seed`, for a fixed random light field.
     fn kernel_view(d: &DisplayGeometry, eye: EyePosition, rays: u32, seed: u64, sequence: SubRaySequence) -> Vec<f64> {
+        kernel_view_of(d, &aberrated(6.0), eye, rays, seed, sequence)
+    }
+
+    /// [`kernel_view`] through the eye `w`.
+    fn kernel_view_of(
+        d: &DisplayGeometry,
+        w: &ZernikeCoefficients,
+        eye: EyePosition,
+        rays: u32,
+        seed: u64,
+        sequence: SubRaySequence,
+    ) -> Vec<f64> {
         let opts = TransportOptions {
             seed,
             sequence,
             wave: wave(550.0, 1).wave.map(|w| WaveSampling { kernel_rays: rays, ..w }),
             ..wave(550.0, 1)
         };
-        let t = TransportMatrix::build(d, &aberrated(6.0), eye, &opts).unwrap();
+        let t = TransportMatrix::build(d, w, eye, &opts).unwrap();
         let l = rand_vec(t.n_samples() * 4, 5);
         let mut y = vec![0f32; t.n_pixels() * 3];
         t.forward_lms(&l, &coupling4(), &mut y);

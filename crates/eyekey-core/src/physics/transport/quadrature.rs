@@ -15,12 +15,19 @@
 //! and because u, r and the bilinear hat all factor per axis, the inner integral is a product of two one-axis
 //! deposits D(δ, φ)[i], δ = P − c, φ the fractional landing of the lenslet's edge, i the tap. D is exact in
 //! closed form from r's first two antiderivatives (the hat is linear between its kinks), tabulated once per
-//! display, wavelength and distance ([`AxisTable`]). The pupil integral is a midpoint rule over square cells
-//! (cells cut by the pupil's edge carry their area inside it and its centroid); r is band-limited to spatial
-//! frequencies below 1/b, for which the midpoint rule is exact once the cells are finer than b, so cells of b/2
-//! leave the pupil's edge and the wavefront's curvature as the only error. Away from a view's core (its lenslet,
-//! screen pixel and three diffraction orders), where only the smooth tails of r reach, cells of four by four are
-//! taken as one.
+//! display, wavelength, distance and cell size, each entry averaged over a cell in δ ([`AxisTable`]).
+//!
+//! The pupil integral is a midpoint rule over square cells of side b (cells cut by the pupil's edge carry their
+//! area inside it and its centroid). Where the landing does not move across a cell, the cell-averaged table makes
+//! it exact: x's deposit depends on P_x alone and y's on P_y alone, so the cell's mean is the product of the two
+//! axes' means. Where the wavefront curves, each axis is seen at n points across the cell on the line through its
+//! centroid (n doubling until the landing moves ≤ 0.25 retinal pixel between neighbours, the table averaged over a
+//! point's share): a curvature along the axes (defocus, and so an accommodation sweep; astigmatism at 0°) keeps
+//! x's landing a function of P_x, which the points follow however fast it moves, with no second axis of
+//! points. A curvature across the axes
+//! (∂s_x/∂P_y: oblique astigmatism, coma) is not followed, and the cells halve until it moves the landing ≤ 0.25
+//! pixel across one. Away from a view's core (its lenslet, screen pixel and two diffraction orders), where only
+//! the smooth tails of r reach, cells of four by four are taken as one.
 
 use std::sync::{Arc, OnceLock};
 
@@ -41,8 +48,12 @@ const CELLS_PER_B: f64 = 1.0;
 /// are halved, up to MAX_HALVINGS times.
 const MAX_SHIFT_PER_CELL: f64 = 0.25;
 const MAX_HALVINGS: usize = 3;
-/// Table nodes of δ per fine cell (even).
-const NODES_PER_CELL: usize = 12;
+/// The most points a fine cell is seen at along each axis.
+const MAX_POINTS_PER_AXIS: usize = 16;
+/// The most cells per axis a fine cell that the pupil's edge cuts is taken as.
+const EDGE_SPLIT: usize = 4;
+/// Table nodes of δ per unit of b.
+const NODES_PER_B: usize = 12;
 /// The most memory the process's axis tables may hold; the oldest go first.
 const TABLE_CACHE_BYTES: usize = 64 << 20;
 
@@ -154,48 +165,50 @@ impl Antiderivatives {
 }
 
 impl AxisTable {
-    /// Tabulates the deposits for `g`, each averaged over a cell of `g.cell` (a few milliseconds).
+    /// Tabulates the deposits for `g`, each averaged over a cell of `g.cell` (a few milliseconds): nodes b/12
+    /// apart in δ, each the mean over the cell about it by Gauss–Legendre's three points on each quarter of b
+    /// (D is smooth on the scale of b: the sinc² pattern blurs every edge by that much).
     pub(super) fn new(g: AxisGeometry, sampler: &DiffractionSampler) -> Self {
         let reach = g.reach();
         let anti = Antiderivatives::new(&g, sampler, reach + g.cell);
-        let step = g.cell / NODES_PER_CELL as f64;
+        let step = g.b / NODES_PER_B as f64;
         let n_delta = (2.0 * reach / step).ceil() as usize + 1;
         let taps = g.taps();
         let stride = (PHI_STEPS + 1) * taps;
         let span = g.a / g.pix;
-        // Point values on a grid half a cell wider each side, then their trapezoidal mean over each cell.
-        let half = NODES_PER_CELL / 2;
-        let n_point = n_delta + 2 * half;
-        let mut pw = vec![0f64; n_point * stride];
-        let mut ppower = vec![0f64; n_point];
-        pw.par_chunks_mut(stride)
-            .zip(ppower.par_iter_mut())
-            .enumerate()
-            .for_each(|(k, (w, power))| {
-                let delta = -reach + (k as f64 - half as f64) * step;
-                *power = anti.moments(delta - 0.5 * g.a, delta + 0.5 * g.a).0 / g.a;
-                for p in 0..=PHI_STEPS {
-                    let phi = p as f64 / PHI_STEPS as f64;
-                    for i in 0..taps {
-                        w[p * taps + i] = Self::deposit(&anti, &g, delta, phi, span, i as f64);
-                    }
-                }
-            });
-        let mean = |k: usize, j: usize, v: &[f64], stride: usize| {
-            let mut acc = 0.5 * (v[k * stride + j] + v[(k + 2 * half) * stride + j]);
-            for m in k + 1..k + 2 * half {
-                acc += v[m * stride + j];
-            }
-            acc / (2 * half) as f64
-        };
+        let segments = (4.0 * g.cell / g.b).ceil().max(1.0) as usize;
+        let seg = g.cell / segments as f64;
+        // Gauss–Legendre's three nodes and weights on [−1, 1].
+        let x3 = (0.6f64).sqrt();
+        let rule = [(-x3, 5.0 / 9.0), (0.0, 8.0 / 9.0), (x3, 5.0 / 9.0)];
+        let points: Vec<(f64, f64)> = (0..segments)
+            .flat_map(|s| {
+                let centre = -0.5 * g.cell + (s as f64 + 0.5) * seg;
+                rule.map(|(x, w)| (centre + 0.5 * seg * x, 0.5 * w / segments as f64))
+            })
+            .collect();
         let mut w = vec![0f32; n_delta * stride];
         let mut power = vec![0f64; n_delta];
-        for k in 0..n_delta {
-            for j in 0..stride {
-                w[k * stride + j] = mean(k, j, &pw, stride) as f32;
-            }
-            power[k] = mean(k, 0, &ppower, 1);
-        }
+        w.par_chunks_mut(stride)
+            .zip(power.par_iter_mut())
+            .enumerate()
+            .for_each(|(k, (w, power))| {
+                let node = -reach + k as f64 * step;
+                let mut acc = vec![0f64; stride];
+                for &(offset, weight) in &points {
+                    let delta = node + offset;
+                    *power += weight * anti.moments(delta - 0.5 * g.a, delta + 0.5 * g.a).0 / g.a;
+                    for p in 0..=PHI_STEPS {
+                        let phi = p as f64 / PHI_STEPS as f64;
+                        for i in 0..taps {
+                            acc[p * taps + i] += weight * Self::deposit(&anti, &g, delta, phi, span, i as f64);
+                        }
+                    }
+                }
+                for (out, v) in w.iter_mut().zip(&acc) {
+                    *out = *v as f32;
+                }
+            });
         Self {
             geometry: g,
             d0: -reach,
@@ -288,6 +301,64 @@ impl AxisTable {
     }
 }
 
+/// One axis of a cell as the deposit reads it: its points and their shifts per derivative term (`[point][term]`).
+type Axis<'a> = (&'a [AxisPoint], &'a [f64]);
+
+/// A cell's deposit along one axis: the mean of its points' taps, the first at retinal pixel `base`, with their
+/// derivatives per term (`[term][tap]`).
+#[derive(Default)]
+struct AxisSum {
+    base: i64,
+    len: usize,
+    w: Vec<f64>,
+    dw: Vec<f64>,
+}
+
+impl AxisSum {
+    /// The mean deposit of `points` along one axis, the lenslet's edge landing at `edge` + shift and the chief
+    /// crossing at `c`; false where no light lands.
+    fn fill(&mut self, table: &AxisTable, edge: f64, c: f64, (points, terms): Axis<'_>, slopes: bool) -> bool {
+        let taps = table.taps;
+        let n_terms = if slopes { terms.len() / points.len() } else { 0 };
+        let (mut lo, mut hi) = (i64::MAX, i64::MIN);
+        for point in points {
+            let base = floor(edge + point.shift) as i64;
+            lo = lo.min(base);
+            hi = hi.max(base);
+        }
+        self.base = lo;
+        self.len = (hi - lo) as usize + taps;
+        self.w.clear();
+        self.w.resize(self.len, 0.0);
+        self.dw.clear();
+        self.dw.resize(self.len * n_terms, 0.0);
+        let (mut w, mut dw) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS]);
+        let mut lit = false;
+        for (n, point) in points.iter().enumerate() {
+            let t = edge + point.shift;
+            let base = floor(t);
+            let phi = (t - base) * PHI_STEPS as f64;
+            let node = (phi as usize).min(PHI_STEPS - 1);
+            if !table.lookup(point.p - c, node, phi - node as f64, slopes, &mut w, &mut dw) {
+                continue;
+            }
+            lit = true;
+            let share = point.weight;
+            let at = (base as i64 - lo) as usize;
+            for (acc, v) in self.w[at..at + taps].iter_mut().zip(&w[..taps]) {
+                *acc += share * v;
+            }
+            for (term, shift) in terms[n * n_terms..(n + 1) * n_terms].iter().enumerate() {
+                let row = &mut self.dw[term * self.len + at..term * self.len + at + taps];
+                for (acc, v) in row.iter_mut().zip(&dw[..taps]) {
+                    *acc += share * shift * v;
+                }
+            }
+        }
+        lit
+    }
+}
+
 /// The most taps a deposit may have (a lenslet wider than six retinal pixels is refused by the caller).
 pub(super) const MAX_TAPS: usize = 8;
 
@@ -299,80 +370,165 @@ pub(super) fn axis_table(g: AxisGeometry, sampler: &DiffractionSampler) -> Arc<A
         .get_or_make(format!("{g:?}"), || AxisTable::new(g, sampler), AxisTable::bytes)
 }
 
-/// One cell of the pupil: its area inside the pupil (mm²), that area's centroid (mm) and the landing shift there
-/// (retinal pixels).
+/// One cell of the pupil: its area inside the pupil (mm²) and that area's centroid (mm).
 #[derive(Clone, Copy, Default)]
 struct Cell {
     area: f64,
     p: [f64; 2],
-    shift: [f64; 2],
 }
 
-/// A coarse cell: its aggregate, its square's corners (mm) and its fine cells.
+/// One of a fine cell's points along one axis: its pupil coordinate on that axis (mm), the landing's shift along
+/// that axis there (retinal pixels) and its weight.
+#[derive(Clone, Copy, Default)]
+struct AxisPoint {
+    p: f64,
+    shift: f64,
+    /// The point's share of the cell's area inside the pupil.
+    weight: f64,
+}
+
+/// Cells' points along each axis ([`PupilCells`]): `[cell][axis][point]`, with the landing's shift along the axis
+/// per unit of each derivative term, `[cell][axis][point][term]`.
+#[derive(Default)]
+struct Points {
+    /// Each cell's first point and its points per axis.
+    cells: Vec<(usize, usize)>,
+    points: Vec<AxisPoint>,
+    terms: Vec<f64>,
+}
+
+impl Points {
+    /// Adds a cell with centroid `p` and `strips` ((weight, coordinate) per point) along each axis: each point lies
+    /// on the line through the centroid, with the landing's shift there from `shift_at`.
+    fn push<F>(&mut self, p: [f64; 2], strips: &[Vec<(f64, f64)>; 2], shift_at: &F) -> f64
+    where
+        F: Fn([f64; 2]) -> ([f64; 2], Vec<[f64; 2]>),
+    {
+        let mut largest = 0f64;
+        self.cells.push((self.points.len(), strips[0].len()));
+        for (axis, strips) in strips.iter().enumerate() {
+            for &(weight, along) in strips {
+                let mut at = p;
+                at[axis] = along;
+                let (s, t) = shift_at(at);
+                largest = largest.max(s[axis].abs());
+                self.points.push(AxisPoint {
+                    p: along,
+                    shift: s[axis],
+                    weight,
+                });
+                self.terms.extend(t.iter().map(|v| v[axis]));
+            }
+        }
+        largest
+    }
+
+    /// Cell `c`'s points along `axis`, and their shifts per derivative term (`[point][term]`).
+    #[inline]
+    fn axis(&self, c: usize, axis: usize, n_terms: usize) -> Axis<'_> {
+        let (first, n) = self.cells[c];
+        let at = first + axis * n;
+        (&self.points[at..at + n], &self.terms[at * n_terms..(at + n) * n_terms])
+    }
+}
+
+/// A coarse cell: its area and centroid, its square's corners (mm) and its fine cells.
 type CoarseCell = (Cell, [f64; 2], [f64; 2], std::ops::Range<usize>);
 
-/// The pupil's cells, fine and coarse (each coarse cell COARSE × COARSE fine ones, its area, centroid and mean
-/// shift), with every cell's landing shift per derivative term.
+/// The pupil's cells, fine and coarse (each coarse cell COARSE × COARSE fine ones), each seen along each axis at
+/// `per_axis` points.
+///
+/// A cell's points along x lie on the line through its centroid, one per strip of the cell, each weighted by its
+/// strip's share of the cell's area inside the pupil and placed at that share's mean coordinate, with the landing's
+/// shift along x there; the same along y. Where the wavefront's curvature is along the axes, x's landing depends
+/// on P_x alone and y's on P_y alone, so the cell's deposit is the product of the two axes' weighted mean deposits,
+/// which the points follow however fast the landing moves. A coarse cell's strips are its fine cells' strips four
+/// by four.
 struct PupilCells {
     fine: Vec<Cell>,
-    fine_terms: Vec<[f64; 2]>,
+    fine_points: Points,
     coarse: Vec<CoarseCell>,
-    coarse_terms: Vec<[f64; 2]>,
+    coarse_points: Points,
     max_shift: f64,
 }
 
 impl PupilCells {
-    /// Cells of side `h` over a pupil of radius `tracer.r_p`, each with its share of the disc (8 × 8 points where
-    /// the edge crosses it), ordered coarse cell by coarse cell.
-    fn new(tracer: &Tracer<'_>, h: f64, coarse_per: usize, with_shift: bool) -> Self {
+    /// Cells of side `h` over a pupil of radius `tracer.r_p`, each with its share of the disc (sampled where the
+    /// edge crosses it), ordered coarse cell by coarse cell, with `per_axis` points along each axis.
+    fn new(tracer: &Tracer<'_>, h: f64, coarse_per: usize, per_axis: usize, with_shift: bool) -> Self {
         let r_p = tracer.r_p;
         let n_coarse = ((2.0 * r_p / h).ceil() as usize).div_ceil(coarse_per);
         let origin = -0.5 * (n_coarse * coarse_per) as f64 * h;
         let n_terms = tracer.term_polys.len();
         let k = tracer.shift_per_grad;
-        let (mut fine, mut fine_terms, mut coarse, mut coarse_terms) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let mut max_shift = 0f64;
+        let shift_at = |p: [f64; 2]| {
+            if !with_shift {
+                return ([0.0; 2], vec![[0.0; 2]; n_terms]);
+            }
+            let g = tracer.poly.gradient(p[0] / r_p, p[1] / r_p);
+            let t: Vec<[f64; 2]> = tracer
+                .term_polys
+                .iter()
+                .map(|tp| {
+                    let g = tp.gradient(p[0] / r_p, p[1] / r_p);
+                    [k * g[0], k * g[1]]
+                })
+                .collect();
+            ([k * g[0], k * g[1]], t)
+        };
+        let mut cells = Self {
+            fine: Vec::new(),
+            fine_points: Points::default(),
+            coarse: Vec::new(),
+            coarse_points: Points::default(),
+            max_shift: 0.0,
+        };
         let r2 = r_p * r_p;
         for cy in 0..n_coarse {
             for cx in 0..n_coarse {
-                let start = fine.len();
-                let (mut area, mut moment, mut shift) = (0.0, [0.0; 2], [0.0; 2]);
-                let mut terms = vec![[0.0; 2]; n_terms];
+                let start = cells.fine.len();
+                let (mut area, mut moment) = (0.0, [0.0; 2]);
+                // The coarse strips' (area, moment) along each axis.
+                let mut coarse_strips = [vec![(0.0, 0.0); per_axis], vec![(0.0, 0.0); per_axis]];
+                let coarse_lo = [
+                    origin + (cx * coarse_per) as f64 * h,
+                    origin + (cy * coarse_per) as f64 * h,
+                ];
+                let coarse_strip = coarse_per as f64 * h / per_axis as f64;
                 for fy in 0..coarse_per {
                     for fx in 0..coarse_per {
-                        let lo = [
-                            origin + (cx * coarse_per + fx) as f64 * h,
-                            origin + (cy * coarse_per + fy) as f64 * h,
-                        ];
-                        let Some((a, p)) = disc_share(lo, h, r_p, r2) else {
-                            continue;
-                        };
-                        let (s, t) = if with_shift {
-                            let g = tracer.poly.gradient(p[0] / r_p, p[1] / r_p);
-                            let t: Vec<[f64; 2]> = tracer
-                                .term_polys
-                                .iter()
-                                .map(|tp| {
-                                    let g = tp.gradient(p[0] / r_p, p[1] / r_p);
-                                    [k * g[0], k * g[1]]
-                                })
-                                .collect();
-                            ([k * g[0], k * g[1]], t)
+                        let lo = [coarse_lo[0] + fx as f64 * h, coarse_lo[1] + fy as f64 * h];
+                        // A cell the pupil's edge cuts is taken as `split` × `split` cells, so that the product
+                        // of its marginals stays close to its joint light where the landing moves across it.
+                        let split = if disc_share(lo, h, r_p, r2).is_some_and(|(a, _)| a < h * h) {
+                            per_axis.min(EDGE_SPLIT)
                         } else {
-                            ([0.0; 2], vec![[0.0; 2]; n_terms])
+                            1
                         };
-                        max_shift = max_shift.max(s[0].abs()).max(s[1].abs());
-                        area += a;
-                        for n in 0..2 {
-                            moment[n] += a * p[n];
-                            shift[n] += a * s[n];
+                        let side = h / split as f64;
+                        for sy in 0..split {
+                            for sx in 0..split {
+                                let lo = [lo[0] + sx as f64 * side, lo[1] + sy as f64 * side];
+                                let Some((a, p, strips)) = disc_strips(lo, side, r_p, r2, per_axis / split) else {
+                                    continue;
+                                };
+                                area += a;
+                                for n in 0..2 {
+                                    moment[n] += a * p[n];
+                                }
+                                for axis in 0..2 {
+                                    for &(w, along) in &strips[axis] {
+                                        let k = ((along - coarse_lo[axis]) / coarse_strip) as usize;
+                                        let acc = &mut coarse_strips[axis][k.min(per_axis - 1)];
+                                        acc.0 += a * w;
+                                        acc.1 += a * w * along;
+                                    }
+                                }
+                                let largest = cells.fine_points.push(p, &strips, &shift_at);
+                                cells.max_shift = cells.max_shift.max(largest);
+                                cells.fine.push(Cell { area: a, p });
+                            }
                         }
-                        for (acc, v) in terms.iter_mut().zip(&t) {
-                            acc[0] += a * v[0];
-                            acc[1] += a * v[1];
-                        }
-                        fine.push(Cell { area: a, p, shift: s });
-                        fine_terms.extend(t);
                     }
                 }
                 if area > 0.0 {
@@ -381,23 +537,28 @@ impl PupilCells {
                         origin + (cy * coarse_per) as f64 * h,
                     ];
                     let hi = [lo[0] + coarse_per as f64 * h, lo[1] + coarse_per as f64 * h];
-                    let cell = Cell {
-                        area,
-                        p: [moment[0] / area, moment[1] / area],
-                        shift: [shift[0] / area, shift[1] / area],
-                    };
-                    coarse.push((cell, lo, hi, start..fine.len()));
-                    coarse_terms.extend(terms.iter().map(|t| [t[0] / area, t[1] / area]));
+                    let p = [moment[0] / area, moment[1] / area];
+                    let strip = coarse_strip;
+                    let strips = [0, 1].map(|axis| {
+                        coarse_strips[axis]
+                            .iter()
+                            .enumerate()
+                            .map(|(k, &(w, m))| {
+                                if w > 0.0 {
+                                    (w / area, m / w)
+                                } else {
+                                    (0.0, lo[axis] + (k as f64 + 0.5) * strip)
+                                }
+                            })
+                            .collect()
+                    });
+                    cells.coarse_points.push(p, &strips, &shift_at);
+                    let cell = Cell { area, p };
+                    cells.coarse.push((cell, lo, hi, start..cells.fine.len()));
                 }
             }
         }
-        Self {
-            fine,
-            fine_terms,
-            coarse,
-            coarse_terms,
-            max_shift,
-        }
+        cells
     }
 }
 
@@ -443,6 +604,56 @@ fn disc_share(lo: [f64; 2], h: f64, r: f64, r2: f64) -> Option<(f64, [f64; 2])> 
             [sum[0] / count as f64, sum[1] / count as f64],
         )
     })
+}
+
+/// The square [lo, lo + h]² inside the disc of radius `r` (r² = `r2`) as [`disc_share`] gives it, with its
+/// marginal along each axis in `n` strips: each strip's share of the inside area and the mean coordinate of its
+/// inside part, from M × M points (M a multiple of n, at least 8) where the edge crosses the square.
+#[allow(clippy::type_complexity)]
+fn disc_strips(lo: [f64; 2], h: f64, r: f64, r2: f64, n: usize) -> Option<(f64, [f64; 2], [Vec<(f64, f64)>; 2])> {
+    let (area, centre) = disc_share(lo, h, r, r2)?;
+    let strip = h / n as f64;
+    if area >= h * h {
+        let even = |axis: usize| {
+            (0..n)
+                .map(|i| (1.0 / n as f64, lo[axis] + (i as f64 + 0.5) * strip))
+                .collect()
+        };
+        return Some((area, centre, [even(0), even(1)]));
+    }
+    let m = n * 8usize.div_ceil(n);
+    let per = m / n;
+    let mut counts = [vec![0usize; n], vec![0usize; n]];
+    let mut sums = [vec![0f64; n], vec![0f64; n]];
+    let mut inside = 0usize;
+    for j in 0..m {
+        for i in 0..m {
+            let q = [
+                lo[0] + (i as f64 + 0.5) * h / m as f64,
+                lo[1] + (j as f64 + 0.5) * h / m as f64,
+            ];
+            if q[0] * q[0] + q[1] * q[1] > r2 {
+                continue;
+            }
+            inside += 1;
+            for (axis, k) in [i, j].into_iter().enumerate() {
+                counts[axis][k / per] += 1;
+                sums[axis][k / per] += q[axis];
+            }
+        }
+    }
+    if inside == 0 {
+        return None;
+    }
+    let marginal = |axis: usize| {
+        (0..n)
+            .map(|k| match counts[axis][k] {
+                0 => (0.0, lo[axis] + (k as f64 + 0.5) * strip),
+                c => (c as f64 / inside as f64, sums[axis][k] / c as f64),
+            })
+            .collect()
+    };
+    Some((area, centre, [marginal(0), marginal(1)]))
 }
 
 /// Whether a wave-optics build for an eye at the design distance from `display` with `options` makes its kernels
@@ -518,14 +729,24 @@ impl Tracer<'_> {
                 for my in ky - nb..=ky + nb {
                     for mx in kx - nb..=kx + nb {
                         let c = self.chief(off, [mx, my]);
-                        let at = |cell: &Cell| {
-                            cell.area * table.power_at(cell.p[0] - c[0]) * table.power_at(cell.p[1] - c[1])
+                        let light = |points: &Points, at: usize, area: f64| {
+                            let along = |axis: usize| {
+                                let (points, _) = points.axis(at, axis, 0);
+                                points
+                                    .iter()
+                                    .map(|q| q.weight * table.power_at(q.p - c[axis]))
+                                    .sum::<f64>()
+                            };
+                            area * along(0) * along(1)
                         };
-                        for (cell, lo, hi, fine) in &cells.coarse {
+                        for (at, (cell, lo, hi, fine)) in cells.coarse.iter().enumerate() {
                             if cells.near(lo, hi, c, core) {
-                                power += cells.fine[fine.clone()].iter().map(at).sum::<f64>();
+                                power += fine
+                                    .clone()
+                                    .map(|f| light(&cells.fine_points, f, cells.fine[f].area))
+                                    .sum::<f64>();
                             } else {
-                                power += at(cell);
+                                power += light(&cells.coarse_points, at, cell.area);
                             }
                         }
                     }
@@ -545,7 +766,6 @@ impl Tracer<'_> {
         let off = self.view_offset(i, j);
         let ([kx, ky], nb) = self.quadrature_window();
         let n_terms = self.term_polys.len();
-        let taps = table.taps;
         // The box holding every landing: the window's blocks, the lenslet, the largest aberration shift.
         let reach = cells.max_shift + 2.0;
         let bounds = |kc: i64| {
@@ -558,7 +778,7 @@ impl Tracer<'_> {
         let (mut evaluated, mut power) = (0u64, 0f64);
         let mut dfs = vec![0.0; n_terms];
         let slopes = n_terms > 0;
-        let (mut wx, mut dwx, mut wy, mut dwy) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS], [0.0; MAX_TAPS], [0.0; MAX_TAPS]);
+        let (mut sx, mut sy) = (AxisSum::default(), AxisSum::default());
         for my in ky - nb..=ky + nb {
             for mx in kx - nb..=kx + nb {
                 let c = self.chief(off, [mx, my]);
@@ -567,48 +787,41 @@ impl Tracer<'_> {
                     (k - 1.0) / 2.0 + (-0.5 * g.a - mx as f64 * pitch) / g.pix,
                     (k - 1.0) / 2.0 + (-0.5 * g.a - my as f64 * pitch) / g.pix,
                 ];
-                let mut deposit = |cell: &Cell, terms: &[[f64; 2]], kernel: &mut KernelBox| {
-                    let t = [edge[0] + cell.shift[0], edge[1] + cell.shift[1]];
-                    let base = [floor(t[0]), floor(t[1])];
-                    let phi = [(t[0] - base[0]) * PHI_STEPS as f64, (t[1] - base[1]) * PHI_STEPS as f64];
-                    let node = [
-                        (phi[0] as usize).min(PHI_STEPS - 1),
-                        (phi[1] as usize).min(PHI_STEPS - 1),
-                    ];
-                    let frac = [phi[0] - node[0] as f64, phi[1] - node[1] as f64];
+                let mut deposit = |area: f64, x: Axis<'_>, y: Axis<'_>, kernel: &mut KernelBox| {
                     evaluated += 1;
-                    if !table.lookup(cell.p[0] - c[0], node[0], frac[0], slopes, &mut wx, &mut dwx)
-                        || !table.lookup(cell.p[1] - c[1], node[1], frac[1], slopes, &mut wy, &mut dwy)
-                    {
+                    if !sx.fill(table, edge[0], c[0], x, slopes) || !sy.fill(table, edge[1], c[1], y, slopes) {
                         return;
                     }
-                    let (sx, sy): (f64, f64) = (wx[..taps].iter().sum(), wy[..taps].iter().sum());
-                    power += cell.area * sx * sy;
+                    let (wx, wy) = (&sx.w[..sx.len], &sy.w[..sy.len]);
+                    power += area * wx.iter().sum::<f64>() * wy.iter().sum::<f64>();
                     if !slopes {
-                        kernel.add_outer(base[0] as i64, base[1] as i64, &wx[..taps], &wy[..taps], cell.area);
+                        kernel.add_outer(sx.base, sy.base, wx, wy, area);
                         return;
                     }
-                    for b in 0..taps {
-                        for a in 0..taps {
-                            let w = cell.area * wx[a] * wy[b];
-                            for (df, tshift) in dfs.iter_mut().zip(terms) {
-                                *df = cell.area * (dwx[a] * tshift[0] * wy[b] + wx[a] * dwy[b] * tshift[1]);
+                    for (b, wyb) in wy.iter().enumerate() {
+                        for (a, wxa) in wx.iter().enumerate() {
+                            for (t, df) in dfs.iter_mut().enumerate() {
+                                *df = area * (sx.dw[t * sx.len + a] * wyb + wxa * sy.dw[t * sy.len + b]);
                             }
-                            kernel.add(base[0] as i64 + a as i64, base[1] as i64 + b as i64, w, &dfs);
+                            kernel.add(sx.base + a as i64, sy.base + b as i64, area * wxa * wyb, &dfs);
                         }
                     }
                 };
                 for (at, (cell, lo, hi, fine)) in cells.coarse.iter().enumerate() {
                     if cells.near(lo, hi, c, core) {
                         for f in fine.clone() {
-                            deposit(
-                                &cells.fine[f],
-                                &cells.fine_terms[f * n_terms..(f + 1) * n_terms],
-                                &mut kernel,
+                            let (x, y) = (
+                                cells.fine_points.axis(f, 0, n_terms),
+                                cells.fine_points.axis(f, 1, n_terms),
                             );
+                            deposit(cells.fine[f].area, x, y, &mut kernel);
                         }
                     } else {
-                        deposit(cell, &cells.coarse_terms[at * n_terms..(at + 1) * n_terms], &mut kernel);
+                        let (x, y) = (
+                            cells.coarse_points.axis(at, 0, n_terms),
+                            cells.coarse_points.axis(at, 1, n_terms),
+                        );
+                        deposit(cell.area, x, y, &mut kernel);
                     }
                 }
             }
@@ -621,13 +834,14 @@ impl Tracer<'_> {
         }
     }
 
-    /// The most the landing shift s(P) changes per mm of pupil (retinal pixels), over a 17 × 17 grid of the
-    /// pupil, by differences over 1 % of its radius.
-    fn shift_slope(&self) -> f64 {
+    /// The most the landing shift s(P) changes per mm of pupil (retinal pixels) over a 17 × 17 grid of the
+    /// pupil, by differences over 1 % of its radius: along its own axis (∂s_x/∂P_x, ∂s_y/∂P_y), which a cell's
+    /// points follow, and across (∂s_x/∂P_y, ∂s_y/∂P_x), which they do not.
+    fn shift_slopes(&self) -> (f64, f64) {
         const N: usize = 17;
         let eps = 0.01;
         let k = self.shift_per_grad;
-        let mut slope = 0f64;
+        let (mut along, mut across) = (0f64, 0f64);
         for j in 0..N {
             for i in 0..N {
                 let (x, y) = (
@@ -640,13 +854,12 @@ impl Tracer<'_> {
                 let g = self.poly.gradient(x, y);
                 let gx = self.poly.gradient(x + eps, y);
                 let gy = self.poly.gradient(x, y + eps);
-                for n in 0..2 {
-                    let change = (gx[n] - g[n]).abs() + (gy[n] - g[n]).abs();
-                    slope = slope.max(k * change / (eps * self.r_p));
-                }
+                let per = k / (eps * self.r_p);
+                along = along.max(per * (gx[0] - g[0]).abs()).max(per * (gy[1] - g[1]).abs());
+                across = across.max(per * (gy[0] - g[0]).abs()).max(per * (gx[1] - g[1]).abs());
             }
         }
-        slope
+        (along, across)
     }
 
     /// Every view's kernel by quadrature, normalised as the sampled kernels are (a plain image seen at its own
@@ -654,18 +867,25 @@ impl Tracer<'_> {
     pub(super) fn quadrature_kernels(&self) -> Vec<ViewKernel> {
         let d = self.display;
         let mut g = self.axis_geometry();
-        // Halve the cells until the landing moves by at most MAX_SHIFT_PER_CELL across one.
-        let slope = self.shift_slope();
+        // Halve the cells until the landing moves by at most MAX_SHIFT_PER_CELL across one in the direction a
+        // cell's points do not follow, then take points along each axis until it moves by at most that between
+        // neighbours; the table is averaged over a point's share of the cell.
+        let (along, across) = self.shift_slopes();
         let coarse_per = COARSE;
         for _ in 0..MAX_HALVINGS {
-            if slope * g.cell <= MAX_SHIFT_PER_CELL {
+            if across * g.cell <= MAX_SHIFT_PER_CELL {
                 break;
             }
             g.cell *= 0.5;
         }
-        let table = axis_table(g, self.sampler.expect("a wave-optics build"));
         let h = g.cell;
-        let cells = PupilCells::new(self, h, coarse_per, true);
+        let mut per_axis = 1;
+        while along * h / per_axis as f64 > MAX_SHIFT_PER_CELL && per_axis < MAX_POINTS_PER_AXIS {
+            per_axis *= 2;
+        }
+        g.cell = h / per_axis as f64;
+        let table = axis_table(g, self.sampler.expect("a wave-optics build"));
+        let cells = PupilCells::new(self, h, coarse_per, per_axis, true);
         let views: Vec<(u32, u32)> = (0..d.views_v)
             .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
             .collect();
@@ -678,7 +898,7 @@ impl Tracer<'_> {
             kernels.iter().map(|k| k.power).sum()
         } else {
             let design = self.at_design_position();
-            design.quadrature_power(&PupilCells::new(&design, h, coarse_per, false), &table)
+            design.quadrature_power(&PupilCells::new(&design, h, coarse_per, per_axis, false), &table)
         };
         self.normalise(&mut kernels, power);
         kernels
