@@ -50,8 +50,10 @@ const MAX_SHIFT_PER_CELL: f64 = 0.25;
 const MAX_HALVINGS: usize = 3;
 /// The most points a fine cell is seen at along each axis.
 const MAX_POINTS_PER_AXIS: usize = 16;
-/// The most cells per axis a fine cell that the pupil's edge cuts is taken as.
+/// The most cells per axis a fine cell that the pupil's edge cuts is taken as, and the most the landing may move
+/// along an axis across one of them, retinal pixels.
 const EDGE_SPLIT: usize = 4;
+const EDGE_MOTION: f64 = 1.0;
 /// Table nodes of δ per unit of b.
 const NODES_PER_B: usize = 12;
 /// The most memory the process's axis tables may hold; the oldest go first.
@@ -268,9 +270,8 @@ impl AxisTable {
 
     /// The deposit's taps at δ and φ = (node `p` + fraction `s`)/PHI_STEPS, bilinear in the table, into `w`;
     /// with `slopes`, their derivative in φ into `dw`: that of the bilinear interpolation, so that ∂T/∂W is the
-    /// exact derivative of the operator as built.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
+    /// exact derivative of the operator as built. False outside the table (no light lands there).
+    #[cfg(test)]
     fn lookup(
         &self,
         delta: f64,
@@ -283,6 +284,23 @@ impl AxisTable {
         let Some((k, t)) = self.locate(delta) else {
             return false;
         };
+        self.lookup_at(k, t, p, s, slopes, w, dw);
+        true
+    }
+
+    /// [`Self::lookup`] at δ node `k` and fraction `t` ([`Self::locate`]).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn lookup_at(
+        &self,
+        k: usize,
+        t: f64,
+        p: usize,
+        s: f64,
+        slopes: bool,
+        w: &mut [f64; MAX_TAPS],
+        dw: &mut [f64; MAX_TAPS],
+    ) {
         let taps = self.taps;
         let stride = (PHI_STEPS + 1) * taps;
         let (lo, hi) = (k * stride + p * taps, (k + 1) * stride + p * taps);
@@ -297,7 +315,22 @@ impl AxisTable {
                 dw[i] = (b - a) * PHI_STEPS as f64;
             }
         }
-        true
+    }
+
+    /// Adds `weight` times the deposit's taps at δ node `k` and fraction `t`, φ node `p` and fraction `s` (as
+    /// [`Self::lookup_at`] gives them) into `out`.
+    #[inline(always)]
+    fn accumulate(&self, k: usize, t: f64, p: usize, s: f64, weight: f64, out: &mut [f64]) {
+        let taps = self.taps;
+        let stride = (PHI_STEPS + 1) * taps;
+        let (lo, hi) = (k * stride + p * taps, (k + 1) * stride + p * taps);
+        let (near, far) = (&self.w[lo..lo + 2 * taps], &self.w[hi..hi + 2 * taps]);
+        // Bilinear weights of the four table entries.
+        let (u, v) = (weight * (1.0 - t), weight * t);
+        let (c00, c01, c10, c11) = (u * (1.0 - s), u * s, v * (1.0 - s), v * s);
+        for (i, o) in out.iter_mut().enumerate().take(taps) {
+            *o += c00 * near[i] as f64 + c01 * near[taps + i] as f64 + c10 * far[i] as f64 + c11 * far[taps + i] as f64;
+        }
     }
 }
 
@@ -320,11 +353,25 @@ impl AxisSum {
     fn fill(&mut self, table: &AxisTable, edge: f64, c: f64, (points, terms): Axis<'_>, slopes: bool) -> bool {
         let taps = table.taps;
         let n_terms = if slopes { terms.len() / points.len() } else { 0 };
-        let (mut lo, mut hi) = (i64::MAX, i64::MIN);
-        for point in points {
-            let base = floor(edge + point.shift) as i64;
+        // Each point's table position, or none where no light lands; the taps' extent.
+        let mut at = [(0i64, 0usize, 0usize, 0f64, 0f64, 0usize); MAX_POINTS_PER_AXIS];
+        let (mut lo, mut hi, mut lit) = (i64::MAX, i64::MIN, 0usize);
+        for (n, point) in points.iter().enumerate() {
+            let Some((k, tk)) = table.locate(point.p - c) else {
+                continue;
+            };
+            let t = edge + point.shift;
+            let base = floor(t);
+            let phi = (t - base) * PHI_STEPS as f64;
+            let node = (phi as usize).min(PHI_STEPS - 1);
+            let base = base as i64;
             lo = lo.min(base);
             hi = hi.max(base);
+            at[lit] = (base, k, node, tk, phi - node as f64, n);
+            lit += 1;
+        }
+        if lit == 0 {
+            return false;
         }
         self.base = lo;
         self.len = (hi - lo) as usize + taps;
@@ -332,30 +379,69 @@ impl AxisSum {
         self.w.resize(self.len, 0.0);
         self.dw.clear();
         self.dw.resize(self.len * n_terms, 0.0);
-        let (mut w, mut dw) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS]);
-        let mut lit = false;
-        for (n, point) in points.iter().enumerate() {
-            let t = edge + point.shift;
-            let base = floor(t);
-            let phi = (t - base) * PHI_STEPS as f64;
-            let node = (phi as usize).min(PHI_STEPS - 1);
-            if !table.lookup(point.p - c, node, phi - node as f64, slopes, &mut w, &mut dw) {
-                continue;
-            }
-            lit = true;
-            let share = point.weight;
-            let at = (base as i64 - lo) as usize;
-            for (acc, v) in self.w[at..at + taps].iter_mut().zip(&w[..taps]) {
-                *acc += share * v;
-            }
-            for (term, shift) in terms[n * n_terms..(n + 1) * n_terms].iter().enumerate() {
-                let row = &mut self.dw[term * self.len + at..term * self.len + at + taps];
-                for (acc, v) in row.iter_mut().zip(&dw[..taps]) {
-                    *acc += share * shift * v;
+        let (mut dw, mut tw) = ([0.0; MAX_TAPS], [0.0; MAX_TAPS]);
+        for &(base, k, node, tk, s, n) in &at[..lit] {
+            let point = &points[n];
+            let from = (base - lo) as usize;
+            table.accumulate(k, tk, node, s, point.weight, &mut self.w[from..from + taps]);
+            if slopes {
+                table.lookup_at(k, tk, node, s, true, &mut tw, &mut dw);
+                for (term, shift) in terms[n * n_terms..(n + 1) * n_terms].iter().enumerate() {
+                    let row = &mut self.dw[term * self.len + from..term * self.len + from + taps];
+                    for (acc, v) in row.iter_mut().zip(&dw[..taps]) {
+                        *acc += point.weight * shift * v;
+                    }
                 }
             }
         }
-        lit
+        true
+    }
+}
+
+/// One cell's deposit along one axis in an [`AxisDeposits`]: its first tap's retinal pixel, where its taps start,
+/// how many (0: no light lands), and their sum.
+#[derive(Clone, Copy, Default)]
+struct Entry {
+    base: i64,
+    start: u32,
+    len: u32,
+    sum: f64,
+}
+
+/// Every cell's deposit along one axis for one view index and block along it (fine cells, then coarse cells),
+/// with whether each coarse cell reaches the view's core along this axis.
+#[derive(Default)]
+struct AxisDeposits {
+    n_terms: usize,
+    entries: Vec<Entry>,
+    near: Vec<bool>,
+    w: Vec<f64>,
+    /// Per entry, `[term][tap]` from `start · n_terms`.
+    dw: Vec<f64>,
+}
+
+impl AxisDeposits {
+    fn push(&mut self, sum: &AxisSum) {
+        let w = &sum.w[..sum.len];
+        self.entries.push(Entry {
+            base: sum.base,
+            start: self.w.len() as u32,
+            len: sum.len as u32,
+            sum: w.iter().sum(),
+        });
+        self.w.extend_from_slice(w);
+        self.dw.extend_from_slice(&sum.dw[..sum.len * self.n_terms]);
+    }
+
+    #[inline]
+    fn taps(&self, e: Entry) -> &[f64] {
+        &self.w[e.start as usize..(e.start + e.len) as usize]
+    }
+
+    #[inline]
+    fn slopes(&self, e: Entry) -> &[f64] {
+        let n = self.n_terms;
+        &self.dw[e.start as usize * n..(e.start + e.len) as usize * n]
     }
 }
 
@@ -370,11 +456,10 @@ pub(super) fn axis_table(g: AxisGeometry, sampler: &DiffractionSampler) -> Arc<A
         .get_or_make(format!("{g:?}"), || AxisTable::new(g, sampler), AxisTable::bytes)
 }
 
-/// One cell of the pupil: its area inside the pupil (mm²) and that area's centroid (mm).
+/// One cell of the pupil: its area inside the pupil (mm²).
 #[derive(Clone, Copy, Default)]
 struct Cell {
     area: f64,
-    p: [f64; 2],
 }
 
 /// One of a fine cell's points along one axis: its pupil coordinate on that axis (mm), the landing's shift along
@@ -455,7 +540,14 @@ struct PupilCells {
 impl PupilCells {
     /// Cells of side `h` over a pupil of radius `tracer.r_p`, each with its share of the disc (sampled where the
     /// edge crosses it), ordered coarse cell by coarse cell, with `per_axis` points along each axis.
-    fn new(tracer: &Tracer<'_>, h: f64, coarse_per: usize, per_axis: usize, with_shift: bool) -> Self {
+    fn new(
+        tracer: &Tracer<'_>,
+        h: f64,
+        coarse_per: usize,
+        per_axis: usize,
+        with_shift: bool,
+        along_motion: f64,
+    ) -> Self {
         let r_p = tracer.r_p;
         let n_coarse = ((2.0 * r_p / h).ceil() as usize).div_ceil(coarse_per);
         let origin = -0.5 * (n_coarse * coarse_per) as f64 * h;
@@ -501,7 +593,11 @@ impl PupilCells {
                         // A cell the pupil's edge cuts is taken as `split` × `split` cells, so that the product
                         // of its marginals stays close to its joint light where the landing moves across it.
                         let split = if disc_share(lo, h, r_p, r2).is_some_and(|(a, _)| a < h * h) {
-                            per_axis.min(EDGE_SPLIT)
+                            let mut split = 1;
+                            while split < per_axis.min(EDGE_SPLIT) && along_motion / split as f64 > EDGE_MOTION {
+                                split *= 2;
+                            }
+                            split
                         } else {
                             1
                         };
@@ -526,7 +622,7 @@ impl PupilCells {
                                 }
                                 let largest = cells.fine_points.push(p, &strips, &shift_at);
                                 cells.max_shift = cells.max_shift.max(largest);
-                                cells.fine.push(Cell { area: a, p });
+                                cells.fine.push(Cell { area: a });
                             }
                         }
                     }
@@ -553,7 +649,7 @@ impl PupilCells {
                             .collect()
                     });
                     cells.coarse_points.push(p, &strips, &shift_at);
-                    let cell = Cell { area, p };
+                    let cell = Cell { area };
                     cells.coarse.push((cell, lo, hi, start..cells.fine.len()));
                 }
             }
@@ -756,14 +852,76 @@ impl Tracer<'_> {
             .sum()
     }
 
-    /// View (i, j)'s kernel by quadrature (module documentation), unnormalised: taps keyed relative to the
-    /// block's first retinal pixel, `power` the light that entered.
-    fn quadrature_view(&self, i: u32, j: u32, cells: &PupilCells, table: &AxisTable) -> ViewKernel {
+    /// Every cell's deposit along `axis` for the views in column (or row) `i` from the block `m` over along it:
+    /// the chief crossing, the lenslet edge's landing and the cell's points all factor per axis, so these serve
+    /// every view and block across (module documentation). Fine cells are filled only inside coarse cells that
+    /// reach the view's core along this axis; coarse cells always.
+    #[allow(clippy::too_many_arguments)]
+    fn axis_deposits(
+        &self,
+        axis: usize,
+        i: u32,
+        m: i64,
+        cells: &PupilCells,
+        table: &AxisTable,
+        n_terms: usize,
+    ) -> AxisDeposits {
+        let g = table.geometry;
+        let d = self.display;
+        let k = self.options.retina_oversample as f64;
+        let index = if axis == 0 { [i, 0] } else { [0, i] };
+        let c = self.chief(self.view_offset(index[0], index[1]), [m, m])[axis];
+        // The lenslet's edge lands at t = (k − 1)/2 + (−A/2 − m·p_h)/pix + s(P).
+        let edge = (k - 1.0) / 2.0 + (-0.5 * g.a - m as f64 * d.hole_pitch_mm) / g.pix;
+        let core = g.core();
+        let slopes = n_terms > 0;
+        let mut out = AxisDeposits {
+            n_terms,
+            entries: Vec::with_capacity(cells.fine.len() + cells.coarse.len()),
+            near: Vec::with_capacity(cells.coarse.len()),
+            ..Default::default()
+        };
+        let mut sum = AxisSum::default();
+        let mut fills = Vec::with_capacity(cells.fine.len());
+        for (at, (_, lo, hi, fine)) in cells.coarse.iter().enumerate() {
+            let near = hi[axis] >= c - core && lo[axis] <= c + core;
+            out.near.push(near);
+            for f in fine.clone() {
+                fills.push(near.then(|| cells.fine_points.axis(f, axis, n_terms)));
+            }
+            let _ = at;
+        }
+        for points in fills {
+            match points {
+                Some(points) if sum.fill(table, edge, c, points, slopes) => out.push(&sum),
+                _ => out.entries.push(Entry::default()),
+            }
+        }
+        for at in 0..cells.coarse.len() {
+            if sum.fill(table, edge, c, cells.coarse_points.axis(at, axis, n_terms), slopes) {
+                out.push(&sum);
+            } else {
+                out.entries.push(Entry::default());
+            }
+        }
+        out
+    }
+
+    /// View (i, j)'s kernel by quadrature (module documentation) from the axes' deposits (`xs[i][block]`,
+    /// `ys[j][block]`), unnormalised: taps keyed relative to the block's first retinal pixel, `power` the light that
+    /// entered.
+    fn quadrature_view(
+        &self,
+        (i, j): (u32, u32),
+        cells: &PupilCells,
+        table: &AxisTable,
+        xs: &[AxisDeposits],
+        ys: &[AxisDeposits],
+    ) -> ViewKernel {
         let d = self.display;
         let g = table.geometry;
         let k = self.options.retina_oversample as f64;
         let pitch = d.hole_pitch_mm;
-        let off = self.view_offset(i, j);
         let ([kx, ky], nb) = self.quadrature_window();
         let n_terms = self.term_polys.len();
         // The box holding every landing: the window's blocks, the lenslet, the largest aberration shift.
@@ -774,54 +932,44 @@ impl Tracer<'_> {
             (lo.floor() as i64, hi.ceil() as i64 + 1)
         };
         let mut kernel = KernelBox::new(bounds(kx), bounds(ky), n_terms);
-        let core = g.core();
         let (mut evaluated, mut power) = (0u64, 0f64);
         let mut dfs = vec![0.0; n_terms];
-        let slopes = n_terms > 0;
-        let (mut sx, mut sy) = (AxisSum::default(), AxisSum::default());
-        for my in ky - nb..=ky + nb {
-            for mx in kx - nb..=kx + nb {
-                let c = self.chief(off, [mx, my]);
-                // The lenslet's edge lands at t = (k − 1)/2 + (−A/2 − m·p_h)/pix + s(P).
-                let edge = [
-                    (k - 1.0) / 2.0 + (-0.5 * g.a - mx as f64 * pitch) / g.pix,
-                    (k - 1.0) / 2.0 + (-0.5 * g.a - my as f64 * pitch) / g.pix,
-                ];
-                let mut deposit = |area: f64, x: Axis<'_>, y: Axis<'_>, kernel: &mut KernelBox| {
+        let blocks = (2 * nb + 1) as usize;
+        let n_fine = cells.fine.len();
+        for by in 0..blocks {
+            let y = &ys[j as usize * blocks + by];
+            for bx in 0..blocks {
+                let x = &xs[i as usize * blocks + bx];
+                let mut deposit = |area: f64, e: usize| {
                     evaluated += 1;
-                    if !sx.fill(table, edge[0], c[0], x, slopes) || !sy.fill(table, edge[1], c[1], y, slopes) {
+                    let (ex, ey) = (x.entries[e], y.entries[e]);
+                    if ex.len == 0 || ey.len == 0 {
                         return;
                     }
-                    let (wx, wy) = (&sx.w[..sx.len], &sy.w[..sy.len]);
-                    power += area * wx.iter().sum::<f64>() * wy.iter().sum::<f64>();
-                    if !slopes {
-                        kernel.add_outer(sx.base, sy.base, wx, wy, area);
+                    let (wx, wy) = (x.taps(ex), y.taps(ey));
+                    power += area * ex.sum * ey.sum;
+                    if n_terms == 0 {
+                        kernel.add_outer(ex.base, ey.base, wx, wy, area);
                         return;
                     }
+                    let (dx, dy) = (x.slopes(ex), y.slopes(ey));
+                    let (lx, ly) = (ex.len as usize, ey.len as usize);
                     for (b, wyb) in wy.iter().enumerate() {
                         for (a, wxa) in wx.iter().enumerate() {
                             for (t, df) in dfs.iter_mut().enumerate() {
-                                *df = area * (sx.dw[t * sx.len + a] * wyb + wxa * sy.dw[t * sy.len + b]);
+                                *df = area * (dx[t * lx + a] * wyb + wxa * dy[t * ly + b]);
                             }
-                            kernel.add(sx.base + a as i64, sy.base + b as i64, area * wxa * wyb, &dfs);
+                            kernel.add(ex.base + a as i64, ey.base + b as i64, area * wxa * wyb, &dfs);
                         }
                     }
                 };
-                for (at, (cell, lo, hi, fine)) in cells.coarse.iter().enumerate() {
-                    if cells.near(lo, hi, c, core) {
+                for (at, (cell, _, _, fine)) in cells.coarse.iter().enumerate() {
+                    if x.near[at] && y.near[at] {
                         for f in fine.clone() {
-                            let (x, y) = (
-                                cells.fine_points.axis(f, 0, n_terms),
-                                cells.fine_points.axis(f, 1, n_terms),
-                            );
-                            deposit(cells.fine[f].area, x, y, &mut kernel);
+                            deposit(cells.fine[f].area, f);
                         }
                     } else {
-                        let (x, y) = (
-                            cells.coarse_points.axis(at, 0, n_terms),
-                            cells.coarse_points.axis(at, 1, n_terms),
-                        );
-                        deposit(cell.area, x, y, &mut kernel);
+                        deposit(cell.area, n_fine + at);
                     }
                 }
             }
@@ -885,20 +1033,33 @@ impl Tracer<'_> {
         }
         g.cell = h / per_axis as f64;
         let table = axis_table(g, self.sampler.expect("a wave-optics build"));
-        let cells = PupilCells::new(self, h, coarse_per, per_axis, true);
+        let cells = PupilCells::new(self, h, coarse_per, per_axis, true, along * h);
         let views: Vec<(u32, u32)> = (0..d.views_v)
             .flat_map(|j| (0..d.views_u).map(move |i| (i, j)))
             .collect();
+        // Each axis's deposits per view index and block along it, shared by every view and block across.
+        let ([kx, ky], nb) = self.quadrature_window();
+        let n_terms = self.term_polys.len();
+        let deposits = |axis: usize, n: u32, kc: i64| -> Vec<AxisDeposits> {
+            let jobs: Vec<(u32, i64)> = (0..n).flat_map(|i| (kc - nb..=kc + nb).map(move |m| (i, m))).collect();
+            jobs.par_iter()
+                .map(|&(i, m)| self.axis_deposits(axis, i, m, &cells, &table, n_terms))
+                .collect()
+        };
+        let (xs, ys) = (deposits(0, d.views_u, kx), deposits(1, d.views_v, ky));
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&(i, j)| self.quadrature_view(i, j, &cells, &table))
+            .map(|&view| self.quadrature_view(view, &cells, &table, &xs, &ys))
             .collect();
         let at_design = self.eye.x_mm == 0.0 && self.eye.y_mm == 0.0;
         let power = if at_design {
             kernels.iter().map(|k| k.power).sum()
         } else {
             let design = self.at_design_position();
-            design.quadrature_power(&PupilCells::new(&design, h, coarse_per, per_axis, false), &table)
+            design.quadrature_power(
+                &PupilCells::new(&design, h, coarse_per, per_axis, false, along * h),
+                &table,
+            )
         };
         self.normalise(&mut kernels, power);
         kernels

@@ -647,9 +647,12 @@ impl StencilOperator {
     pub fn nnz(&self) -> usize {
         let (w, h) = ((self.holes_x * self.k) as i64, (self.holes_y * self.k) as i64);
         let k = self.k as i64;
-        // Holes x ∈ [0, n) with x·k + d ∈ [0, extent).
-        let count =
-            |n: usize, d: i64, extent: i64| (0..n as i64).filter(|x| (0..extent).contains(&(x * k + d))).count();
+        // Holes x ∈ [0, n) with x·k + d ∈ [0, extent): x from ⌈−d/k⌉ to ⌊(extent − 1 − d)/k⌋.
+        let count = |n: usize, d: i64, extent: i64| {
+            let lo = (-d).div_euclid(k) + i64::from((-d).rem_euclid(k) != 0);
+            let hi = (extent - 1 - d).div_euclid(k);
+            (hi.min(n as i64 - 1) - lo.max(0) + 1).max(0) as usize
+        };
         self.views
             .iter()
             .map(|v| {
