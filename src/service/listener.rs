@@ -67,10 +67,12 @@ pub async fn serve(
 ) -> std::io::Result<()> {
     let graceful = hyper_util::server::graceful::GracefulShutdown::new();
     let mut builder = Builder::new(TokioExecutor::new());
+    // hyper's own HTTP/1 timer runs from when it waits for a request's head: for the first request the deadline
+    // below (from the accept) comes first; between requests it is the idle timeout.
     builder
         .http1()
         .timer(TokioTimer::new())
-        .header_read_timeout(limits.header_timeout);
+        .header_read_timeout(limits.idle_timeout.max(limits.header_timeout));
     builder.http2().timer(TokioTimer::new());
     let builder = Arc::new(builder);
     let permits = Arc::new(Semaphore::new(limits.max_connections.max(1)));
