@@ -96,11 +96,10 @@ pub struct TransportOptions {
 #[serde(rename_all = "snake_case")]
 pub enum SubRaySequence {
     /// Lenslet displays: no sub-rays, a deterministic quadrature over the pupil (docs/design.md §2.7); pinhole
-    /// displays: as [`Self::Kronecker`]. Not the default yet: its cells shrink for strongly defocused eyes, and an
-    /// evaluation of refocusing people took four times as long (BENCHMARKS.md "Kernel sampling").
+    /// displays: as [`Self::Kronecker`].
+    #[default]
     Quadrature,
     /// The R₆ Kronecker sequence, shifted at random per view and block (randomised quasi-Monte Carlo).
-    #[default]
     Kronecker,
     /// Independent uniform draws (plain Monte Carlo), for comparison.
     Independent,
