@@ -680,7 +680,7 @@ fn encoded_view_bench(sub_rays: u32) -> Result<String> {
         "display, eye",
         "reference's own error",
         "quadrature",
-        "Kronecker, the job's sub-rays (the default)",
+        "Kronecker, the job's sub-rays (`sequence: kronecker`)",
     ]));
     for name in ["secure", "lenslet"] {
         let display = DisplayGeometry::preset(name)?;

@@ -88,10 +88,11 @@ pub struct TransportOptions {
     pub tracked: bool,
 }
 
-/// How the shift-invariant kernels draw each sub-ray's six uniforms (its point in the aperture, in the screen
-/// pixel, and its diffraction angle). Both give every kernel as an unbiased estimate; the low-discrepancy
-/// sequence spreads one block's sub-rays evenly over the six dimensions, so the kernels' noise is lower for the
-/// same number of sub-rays (docs/design.md §2.7, BENCHMARKS.md "Kernel sampling").
+/// How the shift-invariant kernels are made: by quadrature where the display allows (lenslets: no sub-ray, no
+/// sampling noise), else from sub-rays, each drawing six uniforms (its point in the aperture, in the screen pixel,
+/// and its diffraction angle). Both sequences give every kernel as an unbiased estimate; the low-discrepancy one
+/// spreads one block's sub-rays evenly over the six dimensions, so the kernels' noise is lower for the same number
+/// of sub-rays (docs/design.md §2.7, BENCHMARKS.md "Kernel sampling").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SubRaySequence {

@@ -17,17 +17,18 @@
 //! closed form from r's first two antiderivatives (the hat is linear between its kinks), tabulated once per
 //! display, wavelength, distance and cell size, each entry averaged over a cell in δ ([`AxisTable`]).
 //!
-//! The pupil integral is a midpoint rule over square cells of side b (cells cut by the pupil's edge carry their
-//! area inside it and its centroid). Where the landing does not move across a cell, the cell-averaged table makes
-//! it exact: x's deposit depends on P_x alone and y's on P_y alone, so the cell's mean is the product of the two
-//! axes' means. Where the wavefront curves, each axis is seen at n points across the cell on the line through its
-//! centroid (n doubling until the landing moves ≤ 0.25 retinal pixel between neighbours, the table averaged over a
-//! point's share): a curvature along the axes (defocus, and so an accommodation sweep; astigmatism at 0°) keeps
-//! x's landing a function of P_x, which the points follow however fast it moves, with no second axis of
-//! points. A curvature across the axes
-//! (∂s_x/∂P_y: oblique astigmatism, coma) is not followed, and the cells halve until it moves the landing ≤ 0.25
-//! pixel across one. Away from a view's core (its lenslet, screen pixel and two diffraction orders), where only
-//! the smooth tails of r reach, cells of four by four are taken as one.
+//! The pupil integral is a midpoint rule over square cells of side b, each cell's deposit the product of its two
+//! axes' weighted means ([`PupilCells`]). Where the landing does not move across a cell, the cell-averaged table
+//! makes this exact: x's deposit depends on P_x alone and y's on P_y alone. Where the wavefront curves, each axis
+//! is seen at n points across the cell on the line through its centroid (n doubling until the landing moves
+//! ≤ 0.25 retinal pixel between neighbours, the table averaged over a point's share): a curvature along the axes
+//! (defocus, and so an accommodation sweep; astigmatism at 0°) keeps x's landing a function of P_x, which the
+//! points follow however fast it moves. A curvature across the axes (∂s_x/∂P_y: oblique astigmatism, coma) is not
+//! followed, and the cells halve until it moves the landing ≤ 0.25 pixel across one. A cell the pupil's edge cuts
+//! is split where the landing moves over a pixel along an axis across it. Away from a view's core (its lenslet,
+//! screen pixel and two diffraction orders), where only the smooth tails of r reach, cells of four by four are
+//! taken as one. Each axis's deposits depend on the view's and the block's index along that axis only, so they are
+//! computed once per pair and shared by every view and block across ([`AxisDeposits`]).
 
 use std::sync::{Arc, OnceLock};
 
@@ -44,9 +45,15 @@ const PHI_STEPS: usize = 32;
 const COARSE: usize = 4;
 /// Fine cells per unit of b (the sinc² pattern's first zero at the pupil).
 const CELLS_PER_B: f64 = 1.0;
-/// The most a fine cell may move the landing across it, retinal pixels: where the wavefront curves faster the cells
-/// are halved, up to MAX_HALVINGS times.
+/// The most the landing may move between a cell's neighbouring points along an axis, retinal pixels (more points
+/// where it moves faster, up to MAX_POINTS_PER_AXIS).
 const MAX_SHIFT_PER_CELL: f64 = 0.25;
+/// The most a fine cell may move the landing across the axes (which its points do not follow), retinal pixels:
+/// where it moves faster the cells are halved, up to MAX_HALVINGS times. At 0.125 a target's view of its own frames
+/// comes 0.10–0.13 % from converged on `secure` and `lenslet` instead of 0.16–0.24 %, but the population's
+/// astigmatism halves their cells more: a 1,000-person `secure` evaluation took 342 s instead of 187 s
+/// (docs/design.md §2.7).
+const MAX_SHIFT_ACROSS_CELL: f64 = 0.25;
 const MAX_HALVINGS: usize = 3;
 /// The most points a fine cell is seen at along each axis.
 const MAX_POINTS_PER_AXIS: usize = 16;
@@ -1015,13 +1022,13 @@ impl Tracer<'_> {
     pub(super) fn quadrature_kernels(&self) -> Vec<ViewKernel> {
         let d = self.display;
         let mut g = self.axis_geometry();
-        // Halve the cells until the landing moves by at most MAX_SHIFT_PER_CELL across one in the direction a
-        // cell's points do not follow, then take points along each axis until it moves by at most that between
-        // neighbours; the table is averaged over a point's share of the cell.
+        // Halve the cells until the landing moves by at most MAX_SHIFT_ACROSS_CELL across one in the direction a
+        // cell's points do not follow, then take points along each axis until it moves by at most
+        // MAX_SHIFT_PER_CELL between neighbours; the table is averaged over a point's share of the cell.
         let (along, across) = self.shift_slopes();
         let coarse_per = COARSE;
         for _ in 0..MAX_HALVINGS {
-            if across * g.cell <= MAX_SHIFT_PER_CELL {
+            if across * g.cell <= MAX_SHIFT_ACROSS_CELL {
                 break;
             }
             g.cell *= 0.5;
