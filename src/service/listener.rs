@@ -76,6 +76,7 @@ pub async fn serve(
     builder.http2().timer(TokioTimer::new());
     let builder = Arc::new(builder);
     let permits = Arc::new(Semaphore::new(limits.max_connections.max(1)));
+    let mut refusing = false;
     loop {
         let (tcp, peer) = tokio::select! {
             accepted = listener.accept() => match accepted {
@@ -90,10 +91,18 @@ pub async fn serve(
             _ = super::state::stopped(&mut stop) => break,
         };
         let Ok(permit) = permits.clone().try_acquire_owned() else {
-            tracing::warn!(%peer, max = limits.max_connections, "too many connections; closing a new one");
+            // Logged once per spell at the cap, not once per connection of a flood.
+            if !refusing {
+                tracing::warn!(%peer, max = limits.max_connections, "at the connection cap; closing new connections");
+                refusing = true;
+            }
             drop(tcp);
             continue;
         };
+        if refusing {
+            tracing::info!("below the connection cap again");
+            refusing = false;
+        }
         // A streamed body goes out in several writes; Nagle's algorithm with the client's delayed ACK would
         // hold each response's last segment for ~40 ms.
         if let Err(e) = tcp.set_nodelay(true) {

@@ -344,8 +344,8 @@ impl AxisTable {
 /// One axis of a cell as the deposit reads it: its points and their shifts per derivative term (`[point][term]`).
 type Axis<'a> = (&'a [AxisPoint], &'a [f64]);
 
-/// A cell's deposit along one axis: the mean of its points' taps, the first at retinal pixel `base`, with their
-/// derivatives per term (`[term][tap]`).
+/// A cell's deposit along one axis: the weighted mean of its points' taps, the first at retinal pixel `base`, with
+/// their derivatives per term (`[term][tap]`).
 #[derive(Default)]
 struct AxisSum {
     base: i64,
@@ -355,8 +355,8 @@ struct AxisSum {
 }
 
 impl AxisSum {
-    /// The mean deposit of `points` along one axis, the lenslet's edge landing at `edge` + shift and the chief
-    /// crossing at `c`; false where no light lands.
+    /// The weighted mean deposit of `points` along one axis, the lenslet's edge landing at `edge` + shift and the
+    /// chief crossing at `c`; false where no light lands.
     fn fill(&mut self, table: &AxisTable, edge: f64, c: f64, (points, terms): Axis<'_>, slopes: bool) -> bool {
         let taps = table.taps;
         let n_terms = if slopes { terms.len() / points.len() } else { 0 };
@@ -889,19 +889,15 @@ impl Tracer<'_> {
             ..Default::default()
         };
         let mut sum = AxisSum::default();
-        let mut fills = Vec::with_capacity(cells.fine.len());
-        for (at, (_, lo, hi, fine)) in cells.coarse.iter().enumerate() {
+        for (_, lo, hi, fine) in &cells.coarse {
             let near = hi[axis] >= c - core && lo[axis] <= c + core;
             out.near.push(near);
             for f in fine.clone() {
-                fills.push(near.then(|| cells.fine_points.axis(f, axis, n_terms)));
-            }
-            let _ = at;
-        }
-        for points in fills {
-            match points {
-                Some(points) if sum.fill(table, edge, c, points, slopes) => out.push(&sum),
-                _ => out.entries.push(Entry::default()),
+                if near && sum.fill(table, edge, c, cells.fine_points.axis(f, axis, n_terms), slopes) {
+                    out.push(&sum);
+                } else {
+                    out.entries.push(Entry::default());
+                }
             }
         }
         for at in 0..cells.coarse.len() {
