@@ -911,21 +911,20 @@ impl Tracer<'_> {
     }
 
     /// View (i, j)'s kernel by quadrature (module documentation) from the axes' deposits (`xs[i][block]`,
-    /// `ys[j][block]`), unnormalised: taps keyed relative to the block's first retinal pixel, `power` the light that
+    /// `ys[j][block]`) over the window of blocks ([`Self::quadrature_window`]), unnormalised: taps keyed relative to the block's first retinal pixel, `power` the light that
     /// entered.
     fn quadrature_view(
         &self,
         (i, j): (u32, u32),
         cells: &PupilCells,
         table: &AxisTable,
-        xs: &[AxisDeposits],
-        ys: &[AxisDeposits],
+        (xs, ys): (&[AxisDeposits], &[AxisDeposits]),
+        ([kx, ky], nb): ([i64; 2], i64),
     ) -> ViewKernel {
         let d = self.display;
         let g = table.geometry;
         let k = self.options.retina_oversample as f64;
         let pitch = d.hole_pitch_mm;
-        let ([kx, ky], nb) = self.quadrature_window();
         let n_terms = self.term_polys.len();
         // The box holding every landing: the window's blocks, the lenslet, the largest aberration shift.
         let reach = cells.max_shift + 2.0;
@@ -1052,7 +1051,7 @@ impl Tracer<'_> {
         let (xs, ys) = (deposits(0, d.views_u, kx), deposits(1, d.views_v, ky));
         let mut kernels: Vec<ViewKernel> = views
             .par_iter()
-            .map(|&view| self.quadrature_view(view, &cells, &table, &xs, &ys))
+            .map(|&view| self.quadrature_view(view, &cells, &table, (&xs, &ys), ([kx, ky], nb)))
             .collect();
         let at_design = self.eye.x_mm == 0.0 && self.eye.y_mm == 0.0;
         let power = if at_design {
