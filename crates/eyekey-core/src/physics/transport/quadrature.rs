@@ -911,8 +911,8 @@ impl Tracer<'_> {
     }
 
     /// View (i, j)'s kernel by quadrature (module documentation) from the axes' deposits (`xs[i][block]`,
-    /// `ys[j][block]`) over the window of blocks ([`Self::quadrature_window`]), unnormalised: taps keyed relative to the block's first retinal pixel, `power` the light that
-    /// entered.
+    /// `ys[j][block]`) over the window of blocks ([`Self::quadrature_window`]), unnormalised: taps keyed relative to
+    /// the block's first retinal pixel, `power` the light that entered.
     fn quadrature_view(
         &self,
         (i, j): (u32, u32),
